@@ -1,0 +1,1 @@
+"""igraph_fight."""

@@ -1,0 +1,55 @@
+"""The action-level motion graph: Next(a) from end/start pose compatibility."""
+from __future__ import annotations
+
+import numpy as np
+
+from .rotations import yaw_matrix
+
+
+def boundary_poses(lib) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Start and end poses of every action, each in its own ground frame (pelvis over the origin,
+    fighting direction along +Z): positions (A, J, 3) and velocities (A, J, 3) in m and m/s."""
+    A = lib.n_actions
+    J = lib.skeleton.n_joints
+    P = lib.positions
+    s_pos = np.empty((A, J, 3))
+    e_pos = np.empty((A, J, 3))
+    s_vel = np.empty((A, J, 3))
+    e_vel = np.empty((A, J, 3))
+    for a in range(A):
+        f0, f1 = int(lib.frame_offsets[a]), int(lib.frame_offsets[a + 1]) - 1
+        s_pos[a] = P[f0]
+        s_vel[a] = (P[f0 + 1] - P[f0]) * lib.fps
+        x, z, h = lib.path[f1]
+        Ri = yaw_matrix(-h)
+        e_pos[a] = (P[f1] - np.array([x, 0.0, z])) @ Ri.T
+        e_vel[a] = ((P[f1] - P[f1 - 1]) * lib.fps) @ Ri.T
+    return s_pos, s_vel, e_pos, e_vel
+
+
+def transition_costs(lib, velocity_s: float = 0.05) -> np.ndarray:
+    """(A, A) cost of a -> b: mean joint distance (m) of a's end vs b's start pose,
+    plus velocity_s times the mean joint velocity difference (m/s)."""
+    s_pos, s_vel, e_pos, e_vel = boundary_poses(lib)
+    dp = np.linalg.norm(e_pos[:, None] - s_pos[None], axis=-1).mean(axis=-1)
+    dv = np.linalg.norm(e_vel[:, None] - s_vel[None], axis=-1).mean(axis=-1)
+    return dp + velocity_s * dv
+
+
+def compute_next(lib, threshold_m: float = 0.15, velocity_s: float = 0.05) -> None:
+    """Fill lib.next_offsets / next_ids / next_cost. The successor in the same take is always kept."""
+    cost = transition_costs(lib, velocity_s)
+    A = lib.n_actions
+    ids, costs, offs = [], [], [0]
+    for a in range(A):
+        ok = cost[a] <= threshold_m
+        for b in range(A):
+            if lib.sources[b] == lib.sources[a] and lib.src_start[b] == lib.src_end[a]:
+                ok[b] = True
+        nb = np.nonzero(ok)[0]
+        ids.extend(nb.tolist())
+        costs.extend(cost[a, nb].tolist())
+        offs.append(len(ids))
+    lib.next_offsets = np.array(offs, dtype=np.int64)
+    lib.next_ids = np.array(ids, dtype=np.int32)
+    lib.next_cost = np.array(costs, dtype=np.float64)

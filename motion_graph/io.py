@@ -1,0 +1,60 @@
+"""Load any supported mocap file or folder into Motion objects."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .errors import MocapFormatError
+from .io_asfamc import load_asf_amc
+from .io_bvh import load_bvh
+from .motion import Motion
+
+MOCAP_SUFFIXES = (".bvh", ".amc")
+
+
+def load_motion(path: str | os.PathLike, fps: float | None = None, metres_per_unit: float | None = None) -> Motion:
+    """Load a .bvh file, or an .amc file with the .asf beside it.
+
+    Args:
+        fps: override the frame rate (BVH header / CMU's 120 fps for AMC).
+        metres_per_unit: override the length unit.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise MocapFormatError(str(p), "no such file")
+    suf = p.suffix.lower()
+    if suf == ".bvh":
+        return load_bvh(p, fps=fps, metres_per_unit=metres_per_unit)
+    if suf == ".amc":
+        m = load_asf_amc(p, fps=fps or 120.0)
+        if metres_per_unit is not None:
+            from .io_asfamc import load_amc, load_asf, find_asf_for
+            m = load_amc(p, load_asf(find_asf_for(p), metres_per_unit), fps or 120.0)
+        return m
+    raise MocapFormatError(str(p), f"unsupported file type {suf!r} (expected .bvh or .amc)")
+
+
+def find_mocap_files(paths: list[str | os.PathLike], recursive: bool = True) -> list[Path]:
+    """Expand files and folders into a sorted list of .bvh / .amc files.
+
+    In a folder holding both X.bvh and an .amc of the same stem, the BVH is taken once.
+    """
+    out: list[Path] = []
+    for item in paths:
+        p = Path(item)
+        if p.is_dir():
+            found = [f for f in (p.rglob("*") if recursive else p.glob("*"))
+                     if f.is_file() and f.suffix.lower() in MOCAP_SUFFIXES]
+            out.extend(sorted(found))
+        elif p.exists():
+            out.append(p)
+        else:
+            raise MocapFormatError(str(p), "no such file or folder")
+    seen_bvh = {f.stem for f in out if f.suffix.lower() == ".bvh"}
+    uniq: list[Path] = []
+    for f in out:
+        if f.suffix.lower() == ".amc" and f.stem in seen_bvh:
+            continue
+        if f not in uniq:
+            uniq.append(f)
+    return uniq

@@ -1,0 +1,47 @@
+"""Where the mocap lives: --mocap option, IGRAPH_FIGHT_MOCAP, ../shared/mocap, or the user cache."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+ENV_VAR = "IGRAPH_FIGHT_MOCAP"
+
+
+def user_cache_dir() -> Path:
+    """Per-user cache folder (XDG_CACHE_HOME or ~/.cache)/igraph-fight."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "igraph-fight"
+
+
+def default_fetch_dir() -> Path:
+    """Where `igraph-fight data fetch-cmu` puts the CMU takes by default."""
+    return user_cache_dir() / "mocap"
+
+
+def candidate_mocap_roots() -> list[Path]:
+    repo = Path(__file__).resolve().parent.parent
+    return [Path.cwd().parent / "shared" / "mocap", repo.parent / "shared" / "mocap", default_fetch_dir()]
+
+
+def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
+    """The mocap folder to use: explicit > $IGRAPH_FIGHT_MOCAP > ../shared/mocap > user cache; None if none exists."""
+    if explicit:
+        return Path(explicit)
+    env = os.environ.get(ENV_VAR)
+    if env:
+        return Path(env)
+    for c in candidate_mocap_roots():
+        if c.is_dir():
+            return c
+    return None
+
+
+def boxing_takes(root: Path) -> list[Path]:
+    """The CMU subject-13 boxing takes under a mocap root (BVH in cmu/boxing, else AMC anywhere)."""
+    for sub in ("cmu/boxing", "."):
+        d = root / sub
+        bvh = sorted(d.glob("13_1[78].bvh"))
+        if bvh:
+            return bvh
+    amc = sorted(root.rglob("13_1[78].amc"))
+    return amc

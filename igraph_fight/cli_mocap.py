@@ -32,6 +32,12 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_segment)
 
+    p = sub.add_parser("demo", help="run the whole kinematic chain on the CMU boxing takes and write its artifacts")
+    p.add_argument("--mocap", default=None, help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
+    p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=cmd_demo)
+
     data = sub.add_parser("data", help="download public mocap")
     dsub = data.add_subparsers(dest="data_command", metavar="SUBCOMMAND")
     dsub.required = True
@@ -175,4 +181,15 @@ def cmd_fetch(args: argparse.Namespace) -> int:
         return 2
     for f in files:
         print(f)
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    summary = run_demo(args.mocap, args.out, args.seed, progress=sys.stderr.isatty())
+    print(f"demo finished in {summary['seconds']:.1f} s: {summary['n_actions']} actions "
+          f"({', '.join(f'{k} {v}' for k, v in summary['label_counts'].items())})")
+    for name, path in summary["artifacts"].items():
+        print(f"  {name}: {path}")
     return 0

@@ -57,7 +57,9 @@ class ActionLibrary:
     Attributes (A actions, F frames in total, J joints, S strikes, E transitions):
         skeleton, fps (frames/s), parts (semantic part -> joint).
         labels (A,) str; kinds (A,) int index into ``classify.KINDS``.
-        sources (A,) str file path; src_start, src_end (A,) source frames; src_fps (A,).
+        sources (A,) str file path; src_start, src_end (A,) source frames; src_fps (A,);
+        src_placement (A, 3): where the action starts in its take (pelvis x, z in metres above the
+        take's floor, fighting direction in radians), so take = placement o action frame.
         frame_offsets (A+1,) int.
         rotations (F, J, 4) local joint quaternions (x, y, z, w); root_positions (F, 3) metres;
         local_translations (F, J, 3) or None.
@@ -80,6 +82,7 @@ class ActionLibrary:
     src_start: np.ndarray
     src_end: np.ndarray
     src_fps: np.ndarray
+    src_placement: np.ndarray
     frame_offsets: np.ndarray
     rotations: np.ndarray
     root_positions: np.ndarray
@@ -250,7 +253,7 @@ class ActionLibrary:
                       f"sequence{list(action_ids)}")
 
     # ----- persistence -------------------------------------------------------------------
-    _ARRAYS = ("kinds", "src_start", "src_end", "src_fps", "frame_offsets", "rotations", "root_positions", "path",
+    _ARRAYS = ("kinds", "src_start", "src_end", "src_fps", "src_placement", "frame_offsets", "rotations", "root_positions", "path",
                "dx", "dz", "dheading", "strike_offsets", "strike_joint", "strike_kind", "strike_w0", "strike_w1",
                "strike_peak", "strike_reach", "defence_w0", "defence_w1", "next_offsets", "next_ids", "next_cost")
 
@@ -439,7 +442,7 @@ def _file_sha256(path: str) -> str:
 
 def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: LibraryParams) -> ActionLibrary:
     fps = params.fps
-    rots, roots, lts, paths = [], [], [], []
+    rots, roots, lts, paths, placements = [], [], [], [], []
     offsets = [0]
     st_off, st_joint, st_kind, st_w0, st_w1, st_peak, st_reach = [0], [], [], [], [], [], []
     d_w0, d_w1 = [], []
@@ -449,9 +452,8 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         clip = _resample_exact(m, a, b, n)
         t_src = np.arange(feat.n_frames) / feat.fps
         t_dst = np.linspace(a / m.fps, b / m.fps, n)
-        pel = feat.positions[:, parts["pelvis"]]
-        px = np.interp(t_dst, t_src, pel[:, 0])
-        pz = np.interp(t_dst, t_src, pel[:, 2])
+        pel = clip.positions()[:, parts["pelvis"]]  # exact (unsmoothed) pelvis at library frames
+        px, pz = pel[:, 0], pel[:, 2]
         ph = np.interp(t_dst, t_src, feat.heading) + r["offset"]
         h0 = ph[0]
         Ryi = yaw_matrix(-h0)
@@ -463,6 +465,7 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         c, s = np.cos(h0), np.sin(h0)
         gx, gz = px - px[0], pz - pz[0]
         path = np.stack([c * gx - s * gz, s * gx + c * gz, ph - h0], axis=1)
+        placements.append((px[0], pz[0], h0))
         rots.append(rot)
         roots.append(root)
         if clip.local_translations is not None:
@@ -498,6 +501,7 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         sources=[r["src"] for r in rows], src_start=np.array([r["a"] for r in rows], dtype=np.int64),
         src_end=np.array([r["b"] for r in rows], dtype=np.int64),
         src_fps=np.array([r["src_fps"] for r in rows], dtype=np.float64),
+        src_placement=np.array(placements, dtype=np.float64),
         frame_offsets=np.array(offsets, dtype=np.int64), rotations=np.concatenate(rots),
         root_positions=np.concatenate(roots), local_translations=np.concatenate(lts) if lts else None,
         path=np.concatenate(paths), dx=np.array(dxs), dz=np.array(dzs), dheading=np.array(dhs),

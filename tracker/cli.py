@@ -1,0 +1,156 @@
+"""`igraph-fight tracker ...`: evaluate tracking controllers on action-graph walks, render them,
+export the generated MuJoCo model.
+
+    igraph-fight tracker eval [--controller pd|learned] [--ckpt CKPT] --walks 100 --actions 20 --seed 0 [--json]
+    igraph-fight tracker render --out walk.png|walk.mp4 [--actions 6] [--seed 0] [--seconds 6]
+    igraph-fight tracker model FILE.bvh --out fighter.xml [--fighters 2]
+
+Walks come from ``--library LIB`` (a saved action library), else from the shared CMU boxing
+takes (built on the fly with motion_graph), or from raw clip windows with ``--clips FILE ...``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("tracker", help="physics tracking of action-graph walks in MuJoCo",
+                              description="Track action-graph walks with MuJoCo humanoids: evaluate "
+                                          "controllers, render reference vs simulation, export the model.")
+    sub = p.add_subparsers(dest="tracker_command", metavar="TRACKER_COMMAND")
+    sub.required = True
+
+    def source_args(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+        q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
+        q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
+        q.add_argument("--controller", default="pd", help="pd (default) or learned")
+        q.add_argument("--ckpt", help="controller checkpoint (learned policy; for pd a JSON of gains)")
+        q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")
+        q.add_argument("--seed", type=int, default=0, help="random seed of the walks (default 0)")
+        q.add_argument("--actions", type=int, default=20, help="actions per walk (default 20)")
+
+    e = sub.add_parser("eval", help="random walks through the action graph, tracked; completion, time to fall, error")
+    source_args(e)
+    e.add_argument("--walks", type=int, default=100, help="number of walks (default 100)")
+    e.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    e.add_argument("--progress", action="store_true", help="show a progress bar")
+    e.set_defaults(func=cmd_eval)
+
+    r = sub.add_parser("render", help="side-by-side reference vs simulation: PNG contact sheet or MP4")
+    source_args(r)
+    r.set_defaults(actions=6)
+    r.add_argument("--out", required=True, help="output .png (contact sheet) or .mp4 (video)")
+    r.add_argument("--walk-index", type=int, default=0, help="which walk of the seed (default 0: the first)")
+    r.add_argument("--seconds", type=float, default=6.0, help="seconds of motion to show (default 6)")
+    r.add_argument("--frames", type=int, default=8, help="contact sheet columns (default 8)")
+    r.add_argument("--video-fps", type=float, default=15.0, help="MP4 frame rate (default 15)")
+    r.add_argument("--width", type=int, default=400)
+    r.add_argument("--height", type=int, default=300)
+    r.add_argument("--backend", choices=("egl", "osmesa"), help="OpenGL backend (default: EGL, else OSMesa)")
+    r.set_defaults(func=cmd_render)
+
+    m = sub.add_parser("model", help="write the generated MJCF of a skeleton (calibrated on the file's motion)")
+    m.add_argument("file", help=".bvh or .amc file")
+    m.add_argument("--out", required=True, help="output .xml")
+    m.add_argument("--fighters", type=int, default=1, choices=(1, 2))
+    m.add_argument("--physics-hz", type=float, default=240.0)
+    m.set_defaults(func=cmd_model)
+
+
+def _setup(args):
+    from .evaluate import make_setup
+    from .model import ModelOptions
+    from .walks import walk_source
+    src = walk_source(args.library, args.mocap, args.clips)
+    return make_setup(src, ModelOptions(physics_hz=args.physics_hz))
+
+
+def cmd_eval(args) -> int:
+    from .controller import make_controller
+    from .evaluate import evaluate_walks, format_report
+    if args.walks < 1 or args.actions < 1:
+        print("igraph-fight tracker eval: --walks and --actions must be >= 1", file=sys.stderr)
+        return 2
+    try:
+        controller = make_controller(args.controller, args.ckpt)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"igraph-fight tracker eval: {e}", file=sys.stderr)
+        return 2
+    setup = _setup(args)
+    metrics = evaluate_walks(setup, controller, args.walks, args.actions, args.seed, progress=args.progress)
+    if args.json:
+        print(json.dumps(metrics, indent=2))
+    else:
+        print(format_report(metrics))
+    return 0
+
+
+def cmd_render(args) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from .controller import make_controller
+    from .evaluate import draw_walks
+    from .reference import build_reference
+    from .render import image_stats, record_rollout, render_frames, save_contact_sheet, save_video
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".png", ".mp4"):
+        print("igraph-fight tracker render: --out must end in .png or .mp4", file=sys.stderr)
+        return 2
+    try:
+        controller = make_controller(args.controller, args.ckpt)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+        return 2
+    setup = _setup(args)
+    walks = draw_walks(setup.source, args.walk_index + 1, args.actions, args.seed)
+    motion = setup.source.sequence_motion(walks[args.walk_index])
+    ref = build_reference(motion, setup.scene, 0, fps=setup.config.control_hz)
+    ro = record_rollout(setup.scene, ref, controller, setup.config, max_s=args.seconds)
+    n = len(ro.qpos)
+    if out.suffix.lower() == ".png":
+        steps = sorted(set(int(round(x)) for x in np.linspace(0, n - 1, max(2, args.frames))))
+    else:
+        stride = max(1, int(round(ref.fps / args.video_fps)))
+        steps = list(range(0, n, stride))
+    try:
+        frames = render_frames(setup.scene, ref, ro, steps, args.width, args.height, args.backend)
+    except RuntimeError as e:
+        print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+        return 1
+    if out.suffix.lower() == ".png":
+        save_contact_sheet(frames, out)
+    else:
+        try:
+            save_video(frames, out, ref.fps / max(1, int(round(ref.fps / args.video_fps))))
+        except RuntimeError as e:
+            print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+            return 1
+    st = image_stats(frames[0][1])
+    fell = f"fell at {ro.fall_step / ref.fps:.2f} s ({ro.fall_reason})" if ro.fall_step is not None else "no fall"
+    print(f"wrote {out}: {len(frames)} frames of walk {walks[args.walk_index]} ({controller.name}: {fell}); "
+          f"first simulation frame foreground {100 * st['foreground_share']:.0f}%")
+    return 0
+
+
+def cmd_model(args) -> int:
+    from pathlib import Path
+
+    from motion_graph.io import load_motion
+
+    from .model import ModelOptions, build_fighter_scene
+    from .spec import fighter_spec
+    m = load_motion(args.file)
+    spec = fighter_spec(m.skeleton, [m])
+    scene = build_fighter_scene(spec, args.fighters, ModelOptions(physics_hz=args.physics_hz))
+    Path(args.out).write_text(scene.xml)
+    f = scene.fighters[0]
+    print(f"wrote {args.out}: {args.fighters} fighter(s), {len(f.dof_joints)} ball joints + free root, "
+          f"{f.n_act} actuators each, {spec.mass_kg:g} kg, height {spec.height_m:.2f} m")
+    return 0
+

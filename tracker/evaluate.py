@@ -1,0 +1,193 @@
+"""Walk evaluation: random walks through the action graph, tracked in MuJoCo by a controller.
+
+Protocol (DESIGN.md section 7, "Tracking"): ``n_walks`` random walks of ``n_actions`` actions drawn
+with ``np.random.default_rng(seed)`` (the same walks for every controller), each played with the
+library's root placement and short blends (ActionLibrary.sequence_motion), converted to a
+Reference at the control rate, and tracked from the walk's first frame (reference-state start)
+until the end or a fall (tracker.fall.detect_fall). No force acts on the root.
+
+Metrics (``evaluate_walks`` returns them in a dict; ``--json`` prints it):
+- completion_rate: share of walks finished without a fall.
+- mean_time_to_fall_s: mean over walks of the time tracked before falling, a completed walk
+  counting its full duration (censored); mean_time_to_fall_fallen_s: over fallen walks only.
+- mpjpe_cm: mean global joint position error (cm) over the tracked joints and the control steps
+  before the fall, averaged per walk then over walks.
+- root_drift_cm: horizontal distance (cm) between the simulated and reference pelvis at the
+  end of the run (the fall or the walk's end), mean over walks.
+- realtime_factor: simulated seconds per wall-clock second of the control loop (controller.act +
+  env.step, one fighter, one process).
+- mpjpe_first_1s_cm: the same over the first second only (tracking before balance is lost).
+- reference_error_cm: largest distance between a reference joint site and the walk's forward
+  kinematics (the conversion accuracy); reference foot penetration (p95 per walk averaged, max over
+  walks) before and after the reference is lifted (build_reference lift="auto").
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .controller import Controller
+from .env import EnvConfig, TrackingEnv
+from .model import ModelOptions, build_fighter_scene
+from .reference import build_reference, kinematic_error
+from .spec import FighterSpec, fighter_spec
+
+
+@dataclass
+class WalkResult:
+    walk: list[int]
+    duration_s: float
+    time_s: float
+    fell: bool
+    fall_reason: str | None
+    mpjpe_m: float
+    mpjpe_1s_m: float
+    root_drift_m: float
+    ref_error_max_m: float
+    ref_penetration_p95_m: float
+    ref_penetration_max_m: float
+    ref_penetration_before_lift_p95_m: float
+    ref_penetration_before_lift_max_m: float
+    ref_lift_m: float
+    sim_s: float
+    wall_s: float
+
+
+@dataclass
+class EvalSetup:
+    """What an evaluation runs on: the walk source, the fighter spec and scene, the env."""
+
+    source: object
+    spec: FighterSpec
+    options: ModelOptions = field(default_factory=ModelOptions)
+    config: EnvConfig = field(default_factory=EnvConfig)
+
+    def __post_init__(self) -> None:
+        self.scene = build_fighter_scene(self.spec, 1, self.options)
+        self.env = TrackingEnv(self.scene, self.config)
+
+
+def make_setup(source, options: ModelOptions = ModelOptions(), config: EnvConfig = EnvConfig(),
+               mass_kg: float = 70.0) -> EvalSetup:
+    """Calibrate the fighter on the source's frames and build the one-fighter scene."""
+    spec = fighter_spec(source.skeleton, source.calibration_motions(), mass_kg=mass_kg)
+    return EvalSetup(source, spec, options, config)
+
+
+def run_walk(setup: EvalSetup, controller: Controller, walk: list[int], lift: str = "auto",
+             blend_frames: int = 4) -> WalkResult:
+    """Track one walk with a controller; see the module doc for the metrics."""
+    env = setup.env
+    motion = setup.source.sequence_motion(walk, blend_frames)
+    ctrl_hz = setup.config.control_hz
+    if abs(motion.fps - ctrl_hz) > 1e-9:
+        motion = motion.resample(ctrl_hz)
+    ref = build_reference(motion, setup.scene, 0, lift=lift)
+    fm = setup.scene.fighters[0]
+    kin = kinematic_error(motion, ref, fm)
+    obs = env.reset(ref, 0)
+    controller.reset(env)
+    errs = []
+    fall = None
+    t0 = time.perf_counter()
+    while True:
+        action = controller.act(env, obs)
+        obs, _, done, info = env.step(action)
+        errs.append(info.mpjpe_m[0])
+        if done:
+            fall = info.fall[0]
+            break
+    wall = time.perf_counter() - t0
+    pel = env.data.qpos[fm.qpos_adr:fm.qpos_adr + 2]
+    drift = float(np.linalg.norm(pel - ref.qpos[env.t, :2]))
+    before = ref.meta.get("penetration_before_lift", {})
+    first = errs[:int(round(ctrl_hz))]
+    return WalkResult(list(walk), ref.duration, env.sim_time, fall is not None, fall, float(np.mean(errs)),
+                      float(np.mean(first)), drift, float(kin.max()), ref.penetration.p95_m, ref.penetration.max_m,
+                      before.get("p95_cm", 0.0) / 100.0, before.get("max_cm", 0.0) / 100.0, ref.penetration.lift_m,
+                      env.sim_time, wall)
+
+
+def draw_walks(source, n_walks: int, n_actions: int, seed: int) -> list[list[int]]:
+    """The walks of an evaluation: a function of (source, n_walks, n_actions, seed) only."""
+    rng = np.random.default_rng(seed)
+    return [source.random_walk(n_actions, rng) for _ in range(n_walks)]
+
+
+def evaluate_walks(setup: EvalSetup, controller: Controller, n_walks: int = 100, n_actions: int = 20,
+                   seed: int = 0, progress: bool = False, lift: str = "auto") -> dict:
+    """Run the protocol and return the metrics dict (module doc)."""
+    walks = draw_walks(setup.source, n_walks, n_actions, seed)
+    it = walks
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(walks, desc=f"walks ({controller.name})", unit="walk")
+    results = [run_walk(setup, controller, w, lift) for w in it]
+    return summarise(results, controller, setup, n_actions, seed)
+
+
+def summarise(results: list[WalkResult], controller: Controller, setup: EvalSetup, n_actions: int, seed: int) -> dict:
+    fell = np.array([r.fell for r in results])
+    t = np.array([r.time_s for r in results])
+    sim = sum(r.sim_s for r in results)
+    wall = sum(r.wall_s for r in results)
+    return {
+        "controller": controller.name,
+        "n_walks": len(results),
+        "n_actions": n_actions,
+        "seed": seed,
+        "completion_rate": float(np.mean(~fell)) if len(results) else float("nan"),
+        "mean_time_to_fall_s": float(t.mean()) if len(t) else float("nan"),
+        "mean_time_to_fall_fallen_s": float(t[fell].mean()) if fell.any() else None,
+        "median_time_to_fall_s": float(np.median(t)) if len(t) else float("nan"),
+        "mean_walk_duration_s": float(np.mean([r.duration_s for r in results])) if results else float("nan"),
+        "mpjpe_cm": 100.0 * float(np.mean([r.mpjpe_m for r in results])) if results else float("nan"),
+        "mpjpe_first_1s_cm": 100.0 * float(np.mean([r.mpjpe_1s_m for r in results])) if results else float("nan"),
+        "root_drift_cm": 100.0 * float(np.mean([r.root_drift_m for r in results])) if results else float("nan"),
+        "realtime_factor": sim / wall if wall > 0 else float("nan"),
+        "fall_reasons": _counts([r.fall_reason for r in results if r.fell]),
+        "reference_error_cm": 100.0 * max((r.ref_error_max_m for r in results), default=0.0),
+        "reference_penetration_p95_cm": 100.0 * float(np.mean([r.ref_penetration_p95_m for r in results])) if results else 0.0,
+        "reference_penetration_max_cm": 100.0 * max((r.ref_penetration_max_m for r in results), default=0.0),
+        "reference_penetration_before_lift_p95_cm": 100.0 * float(np.mean([r.ref_penetration_before_lift_p95_m
+                                                                            for r in results])) if results else 0.0,
+        "reference_penetration_before_lift_max_cm": 100.0 * max((r.ref_penetration_before_lift_max_m for r in results),
+                                                                 default=0.0),
+        "reference_lift_cm": 100.0 * float(np.mean([r.ref_lift_m for r in results])) if results else 0.0,
+        "physics_hz": setup.options.physics_hz,
+        "control_hz": setup.config.control_hz,
+        "source": setup.source.describe() if hasattr(setup.source, "describe") else type(setup.source).__name__,
+        "simulated_s": sim,
+        "wall_s": wall,
+    }
+
+
+def _counts(xs: list) -> dict:
+    out: dict = {}
+    for x in xs:
+        out[str(x)] = out.get(str(x), 0) + 1
+    return out
+
+
+def format_report(m: dict) -> str:
+    """Human-readable summary of evaluate_walks' dict."""
+    lines = [
+        f"controller {m['controller']}: {m['n_walks']} walks x {m['n_actions']} actions (seed {m['seed']}), "
+        f"mean walk {m['mean_walk_duration_s']:.1f} s; {m['source']}",
+        f"  completed without a fall: {100 * m['completion_rate']:.1f}%",
+        f"  mean time to fall:        {m['mean_time_to_fall_s']:.2f} s (median {m['median_time_to_fall_s']:.2f} s)",
+        f"  mean joint error:         {m['mpjpe_cm']:.1f} cm (first second: {m['mpjpe_first_1s_cm']:.1f} cm)",
+        f"  root drift:               {m['root_drift_cm']:.1f} cm",
+        f"  real-time factor:         {m['realtime_factor']:.1f}x (one fighter, {m['physics_hz']:g} Hz physics, "
+        f"{m['control_hz']:g} Hz control)",
+        f"  falls by reason:          {m['fall_reasons']}",
+        f"  reference: max joint error {m['reference_error_cm']:.4f} cm; foot penetration p95 "
+        f"{m['reference_penetration_before_lift_p95_cm']:.1f} cm, max {m['reference_penetration_before_lift_max_cm']:.1f} cm; "
+        f"after a mean lift of {m['reference_lift_cm']:.1f} cm: p95 {m['reference_penetration_p95_cm']:.1f} cm, "
+        f"max {m['reference_penetration_max_cm']:.1f} cm",
+    ]
+    return "\n".join(lines)
+
+

@@ -76,10 +76,11 @@ def annotate(feat: ClipFeatures, strikes: list[Strike], a: int, b: int, offset: 
              params: ClassifyParams = ClassifyParams()) -> Annotation:
     """Label and annotate the action spanning frames [a, b] of a clip.
 
-    offset: the clip's stance offset (fighting direction minus hip heading, radians).
+    offset: the clip's stance offset (fighting direction minus head facing, radians).
+    Displacements are measured in the fighting frame at the start; turns from the hip heading.
     """
     P, p = feat.positions, feat.parts
-    h0 = feat.heading[a] + offset
+    h0 = feat.facing[a] + offset
     origin = P[a, p["pelvis"]]
     L = to_local(P[a:b + 1], origin, h0)
     end = L[-1, p["pelvis"]]
@@ -88,7 +89,7 @@ def annotate(feat: ClipFeatures, strikes: list[Strike], a: int, b: int, offset: 
     mine = [s for s in strikes if a <= s.peak <= b]
     ann_strikes = []
     for s in mine:
-        kind = "kick" if s.limb.endswith("toe") else punch_kind(feat, s, feat.heading[s.start] + offset, params)
+        kind = "kick" if s.limb.endswith("toe") else punch_kind(feat, s, feat.facing[s.start] + offset, params)
         tip = L[s.peak - a, p[s.limb]]
         root = L[s.peak - a, p["pelvis"]]
         reach = float(np.hypot(tip[0] - root[0], tip[2] - root[2]))
@@ -100,7 +101,7 @@ def annotate(feat: ClipFeatures, strikes: list[Strike], a: int, b: int, offset: 
     # Defences: the head leaves its place above the pelvis (in the body's own turning frame)
     # and the body does not travel far.
     T = b - a + 1
-    hd = feat.heading[a:b + 1] + offset
+    hd = feat.facing[a:b + 1] + offset  # the fighting frame turning with the head
     d = P[a:b + 1, p["head"]] - P[a:b + 1, p["pelvis"]]
     c, sn = np.cos(hd), np.sin(hd)
     lateral = c * d[:, 0] - sn * d[:, 2]

@@ -25,7 +25,10 @@ class ClipFeatures:
         fps: frame rate.
         positions: (T, J, 3) smoothed global joint positions, metres, floor at y = 0.
         parts: semantic part -> joint index.
-        heading: (T,) facing angle from the hip line (radians about +Y; 0 faces +Z), unwrapped.
+        heading: (T,) body heading from the hip line (radians about +Y; 0 faces +Z), unwrapped.
+        facing: (T,) facing of the head (radians, unwrapped, smoothed over ~0.1 s): the head's
+            forward axis, calibrated per clip as the head-local direction that best matches the
+            hip heading on average (skeletons differ in their rest orientation).
         floor_y: the floor height that was subtracted, metres (in the file's frame).
         foot_height: (T, 2) lowest point of the left/right foot above the floor, metres.
         foot_speed: (T, 2) horizontal speed of the left/right foot, m/s.
@@ -45,6 +48,7 @@ class ClipFeatures:
     pelvis_speed: np.ndarray
     reach: np.ndarray
     arm_length: np.ndarray
+    facing: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -103,7 +107,28 @@ def clip_features(motion: Motion, overrides: dict[str, str] | None = None, floor
     reach = np.stack([np.linalg.norm(P[:, parts[f"{s}_fist"]] - P[:, parts[f"{s}_shoulder"]], axis=-1) for s in "lr"],
                      axis=1) / arm
     heading = np.unwrap(hip_heading(P, parts))
-    return ClipFeatures(fps, P, parts, heading, floor_y, low, foot_speed, hand_speed, pelvis_speed, reach, arm)
+    facing = head_facing(motion, parts, heading)
+    return ClipFeatures(fps, P, parts, heading, floor_y, low, foot_speed, hand_speed, pelvis_speed, reach, arm, facing)
+
+
+FACING_SMOOTH_S = 0.10
+
+
+def head_facing(motion: Motion, parts: dict[str, int], hip_heading_rad: np.ndarray) -> np.ndarray:
+    """Unwrapped facing angle of the head per frame (radians about +Y).
+
+    The head's forward axis in its own frame is the normalised mean over the clip of the hip
+    forward direction expressed in the head frame (so it is found for any rest orientation).
+    """
+    R, _ = motion.global_transforms()
+    Rh = R[:, parts["head"]]
+    fwd = np.stack([np.sin(hip_heading_rad), np.zeros_like(hip_heading_rad), np.cos(hip_heading_rad)], axis=1)
+    local = np.einsum("tba,tb->ta", Rh, fwd).mean(axis=0)
+    local /= max(np.linalg.norm(local), 1e-9)
+    world = Rh @ local
+    ang = np.unwrap(np.arctan2(world[:, 0], world[:, 2]))
+    sigma = max(FACING_SMOOTH_S * motion.fps / 2.0, 0.5)
+    return gaussian_filter1d(ang, sigma, mode="nearest")
 
 
 def to_local(points: np.ndarray, origin: np.ndarray, heading: float) -> np.ndarray:

@@ -36,17 +36,29 @@ def transition_costs(lib, velocity_s: float = 0.05) -> np.ndarray:
     return dp + velocity_s * dv
 
 
-def compute_next(lib, threshold_m: float = 0.15, velocity_s: float = 0.05) -> None:
-    """Fill lib.next_offsets / next_ids / next_cost. The successor in the same take is always kept."""
+def compute_next(lib, threshold_m: float = 0.15, velocity_s: float = 0.05, min_degree: int = 3) -> None:
+    """Fill lib.next_offsets / next_ids / next_cost.
+
+    a -> b when the transition cost is under ``threshold_m``; the successor in the same take is
+    always kept; every action gets at least ``min_degree`` successors and predecessors (its
+    cheapest ones), so no action is a dead end (the last action of a take has no natural successor).
+    """
     cost = transition_costs(lib, velocity_s)
     A = lib.n_actions
-    ids, costs, offs = [], [], [0]
+    ok = cost <= threshold_m
     for a in range(A):
-        ok = cost[a] <= threshold_m
         for b in range(A):
             if lib.sources[b] == lib.sources[a] and lib.src_start[b] == lib.src_end[a]:
-                ok[b] = True
-        nb = np.nonzero(ok)[0]
+                ok[a, b] = True
+    k = min(min_degree, A)
+    for a in range(A):
+        if ok[a].sum() < k:
+            ok[a, np.argsort(cost[a], kind="stable")[:k]] = True
+        if ok[:, a].sum() < k:
+            ok[np.argsort(cost[:, a], kind="stable")[:k], a] = True
+    ids, costs, offs = [], [], [0]
+    for a in range(A):
+        nb = np.nonzero(ok[a])[0]
         ids.extend(nb.tolist())
         costs.extend(cost[a, nb].tolist())
         offs.append(len(ids))

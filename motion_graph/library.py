@@ -1,7 +1,7 @@
 """ActionLibrary: segmented, labelled actions of one skeleton as flat arrays, with Next(a).
 
 Every action is stored in its own start frame: the pelvis starts above the origin, the fighting
-direction (hip heading plus the clip's stance offset) along +Z, +X to the left, Y up, the floor
+direction (head facing plus the clip's stance offset, see motion_graph.strikes) along +Z, +X to the left, Y up, the floor
 at y = 0. Actions are concatenated along the frame axis; ``frame_offsets`` slices them. Frames
 are at the library rate (``fps``, 30 by default); an action's last frame is the next source
 action's first frame, so consecutive actions of a take chain exactly.
@@ -369,8 +369,8 @@ def segment_file(path: str | os.PathLike, params: LibraryParams = LibraryParams(
     m = load_motion(path, fps=fps_override)
     feat = clip_features(m, params.part_overrides)
     strikes = detect_strikes(feat, params.strikes)
-    offset = stance_offset(strikes)
     seg = segment_clip(feat, strikes, params.segment)
+    offset = stance_offset(strikes, feat, seg.cuts)
     anns = [annotate(feat, strikes, a, b, offset, params.classify)
             for a, b in zip(seg.cuts[:-1].tolist(), seg.cuts[1:].tolist())]
     return ClipResult(str(path), m, feat, strikes, offset, seg, anns)
@@ -454,7 +454,7 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         t_dst = np.linspace(a / m.fps, b / m.fps, n)
         pel = clip.positions()[:, parts["pelvis"]]  # exact (unsmoothed) pelvis at library frames
         px, pz = pel[:, 0], pel[:, 2]
-        ph = np.interp(t_dst, t_src, feat.heading) + r["offset"]
+        ph = np.interp(t_dst, t_src, feat.facing) + r["offset"]
         h0 = ph[0]
         Ryi = yaw_matrix(-h0)
         origin = np.array([px[0], feat.floor_y, pz[0]])

@@ -1,10 +1,12 @@
 """Strike (punch and kick) events from arm and leg trajectories of a whole clip, and the clip's
 fighting direction.
 
-The *fighting direction* is the hip heading plus a per-clip stance offset: a boxer stands
-side-on, so the hips point up to 90 degrees away from where the punches go. The offset is the
-circular mean of the punch directions (fist minus shoulder at full extension) relative to the
-hip heading; 0 for clips without punches.
+The *fighting direction* is the head's facing plus a per-clip offset: the circular mean, over
+the clip's punches, of the punch direction (fist minus pelvis on the ground at full extension)
+relative to the head facing when the strike starts; 0 for clips without punches. A boxer stands
+side-on, so the hips point 40-60 degrees away from where the punches go; the head faces the
+target (measured on CMU 13_17/13_18: punch direction minus head facing at the strike start has
+a median of 2 degrees and a spread of 16, against 39 and 29 for the hips).
 """
 from __future__ import annotations
 
@@ -37,7 +39,8 @@ class Strike:
     start/stop: [start, stop) of the whole strike (wind-up to retraction);
     peak: frame of greatest extension; w0/w1: [w0, w1) frames of the extended (hit) phase.
     limb: "l_fist", "r_fist", "l_toe" or "r_toe"; reach: peak reach (fraction of limb length);
-    direction: horizontal angle of the strike at the peak relative to the hip heading (radians).
+    direction: horizontal angle of the strike (effector minus pelvis) at the peak relative to the
+        head facing at the strike's start (radians).
     """
 
     limb: str
@@ -67,9 +70,9 @@ def _side_bounds(sig: np.ndarray, peak: int, before: int, after: int, frac: floa
     return a, b + 1
 
 
-def _angle_rel(feat: ClipFeatures, t: int, a: int, b: int) -> float:
+def _angle_rel(feat: ClipFeatures, t: int, a: int, b: int, t_ref: int) -> float:
     d = feat.positions[t, a] - feat.positions[t, b]
-    return float(wrap_angle(np.arctan2(d[0], d[2]) - feat.heading[t]))
+    return float(wrap_angle(np.arctan2(d[0], d[2]) - feat.facing[t_ref]))
 
 
 def detect_strikes(feat: ClipFeatures, params: StrikeParams = StrikeParams()) -> list[Strike]:
@@ -88,7 +91,7 @@ def detect_strikes(feat: ClipFeatures, params: StrikeParams = StrikeParams()) ->
             w0, w1 = _side_bounds(score, pk, int(0.3 * fps), int(0.3 * fps), 0.85)
             leg = feat.positions[pk, p[f"{s}_toe"]] - feat.positions[pk, p["pelvis"]]
             out.append(Strike(f"{s}_toe", int(start), int(pk), int(stop), int(w0), int(w1),
-                              float(np.linalg.norm(leg)), _angle_rel(feat, pk, p[f"{s}_toe"], p["pelvis"])))
+                              float(np.linalg.norm(leg)), _angle_rel(feat, pk, p[f"{s}_toe"], p["pelvis"], start)))
     kicks = list(out)
     for k, s in enumerate("lr"):
         r = feat.reach[:, k]
@@ -105,14 +108,24 @@ def detect_strikes(feat: ClipFeatures, params: StrikeParams = StrikeParams()) ->
             start, stop = _side_bounds(r, pk, int(0.5 * fps), int(0.6 * fps), 0.15)
             w0, w1 = _side_bounds(r, pk, int(0.3 * fps), int(0.3 * fps), params.window_frac)
             out.append(Strike(f"{s}_fist", int(start), int(pk), int(stop), int(w0), int(w1), float(r[pk]),
-                              _angle_rel(feat, pk, p[f"{s}_fist"], p[f"{s}_shoulder"])))
+                              _angle_rel(feat, pk, p[f"{s}_fist"], p["pelvis"], start)))
     out.sort(key=lambda st: st.peak)
     return out
 
 
-def stance_offset(strikes: list[Strike]) -> float:
-    """Circular mean direction of the punches relative to the hip heading (radians); 0 without punches."""
-    d = np.array([s.direction for s in strikes if s.limb.endswith("fist")])
+def stance_offset(strikes: list[Strike], feat: ClipFeatures | None = None, cuts: np.ndarray | None = None) -> float:
+    """Circular mean direction of the punches relative to the head facing (radians); 0 without
+    punches. With ``feat`` and ``cuts`` the facing is taken at the start of the action holding
+    the punch (the action frame the simulator uses), else at the strike's start."""
+    fists = [s for s in strikes if s.limb.endswith("fist")]
+    if feat is not None and cuts is not None:
+        d = []
+        for s in fists:
+            a = int(cuts[max(0, np.searchsorted(cuts, s.peak) - 1)])
+            d.append(s.direction + feat.facing[s.start] - feat.facing[a])
+        d = np.array(d)
+    else:
+        d = np.array([s.direction for s in fists])
     if len(d) == 0:
         return 0.0
     return float(np.arctan2(np.sin(d).mean(), np.cos(d).mean()))

@@ -178,6 +178,7 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         "report": {k: v for k, v in rep.items() if k not in ("build_seconds", "peak_rss_mb", "timings", "workers",
                                                              "resumed_from_checkpoint")},
     })
+    graph.arrays["library_npz"] = np.frombuffer(library.to_bytes(), dtype=np.uint8)
     rep["content_hash"] = graph.content_hash
     if checkpoint_dir is not None and not keep_checkpoint:
         shutil.rmtree(checkpoint_dir, ignore_errors=True)

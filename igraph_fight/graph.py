@@ -155,6 +155,16 @@ class InteractionGraph:
         """Edge features (decider's perspective), keyed without the ``feat_`` prefix."""
         return {k[5:]: v for k, v in self.arrays.items() if k.startswith("feat_")}
 
+    def load_library(self):
+        """The action library the graph was built from (embedded in the graph file)."""
+        if "library_npz" not in self.arrays:
+            raise GraphFormatError(self.header.get("path", "<graph>"),
+                                   "no embedded action library; pass the library file (--library)")
+        from motion_graph.library import library_from_bytes
+        lib = library_from_bytes(self.arrays["library_npz"].tobytes(), f"{self.header.get('path', '<graph>')}#library")
+        self.check_library(lib)
+        return lib
+
     def check_library(self, lib) -> None:
         """Raise GraphFormatError when ``lib`` is not the library this graph was built from."""
         fp = library_fingerprint(lib)
@@ -269,6 +279,8 @@ class InteractionGraph:
     def save(self, path: str | os.PathLike) -> None:
         """Write the graph file atomically (uncompressed .npz with a JSON header)."""
         arrays = {k: np.ascontiguousarray(self.arrays[k], dtype=ALL_ARRAYS[k]) for k in ALL_ARRAYS}
+        if "library_npz" in self.arrays:
+            arrays["library_npz"] = np.ascontiguousarray(self.arrays["library_npz"], dtype=np.uint8)
         header = {k: v for k, v in self.header.items() if k != "path"}
         header.update(format=FORMAT, version=VERSION, content_hash=_hash_arrays(arrays, ALL_ARRAYS),
                       checksum=_hash_arrays(arrays, arrays.keys()),

@@ -12,8 +12,9 @@ its action (a decision instant). On every frame:
   avatars are pushed apart along the joining line by half the overlap each (their start
   transforms move, so the push persists);
 * hits are judged both ways: a strike of the attacker's action whose window [w0, w1) holds the
-  attacker's frame, and that has not been resolved yet, resolves the first time its effector is
-  within ``contact_radius_m`` of a target point (head centre, chest, belly) of the other. It is
+  attacker's frame, and that has not been resolved yet, resolves the first time its effector (a
+  sphere of ``contact_radius_m``) touches a target sphere of the other (head centre 0.10 m,
+  chest and belly 0.15 m: ``target_radius_m``). It is
   *avoided* (a working defence of the other) when the other's action is a defence whose window
   holds the other's frame at that instant, else it is a *hit* and deals the damage of its kind.
   Each strike resolves at most once (a bit in the attacker's ``mask``). For the sampler's
@@ -89,14 +90,17 @@ TWO_PI = 2.0 * np.pi
 class SimParams:
     """Simulator options.
 
-    contact_radius_m: an effector within this distance of a target point touches it.
+    contact_radius_m: radius of the striking effector (fist or foot), metres.
+    target_radius_m: radius of each target sphere around its point (head centre, chest and belly
+        joints), metres; an effector touches a target when the centres are closer than the sum.
     min_distance_m: pelvis ground distance under which the bodies are pushed apart.
     damage: damage per hit by attack kind (name in motion_graph.KINDS -> value); kinds not
         listed deal ``default_damage``.
     max_event_frames: safety bound on one event's length.
     """
 
-    contact_radius_m: float = 0.12
+    contact_radius_m: float = 0.05
+    target_radius_m: dict = field(default_factory=lambda: {"head": 0.10, "chest": 0.15, "belly": 0.15})
     reach_margin_m: float = 0.3
     min_distance_m: float = 0.4
     default_damage: float = 1.0
@@ -104,7 +108,8 @@ class SimParams:
     max_event_frames: int = 100_000
 
     def to_json(self) -> dict:
-        return {"contact_radius_m": self.contact_radius_m, "reach_margin_m": self.reach_margin_m,
+        return {"contact_radius_m": self.contact_radius_m, "target_radius_m": dict(sorted(self.target_radius_m.items())),
+                "reach_margin_m": self.reach_margin_m,
                 "min_distance_m": self.min_distance_m,
                 "default_damage": self.default_damage, "damage": dict(sorted(self.damage.items())),
                 "max_event_frames": self.max_event_frames}
@@ -199,13 +204,19 @@ class SimTables:
         """Next(a): the actions the avatar may start after finishing a."""
         return self.next_ids[self.next_offsets[a]:self.next_offsets[a + 1]]
 
+    def contact_radius2(self) -> np.ndarray:
+        """(n_targets,) squared contact distance per target (effector + target radius), m^2."""
+        p = self.params
+        return np.array([(p.contact_radius_m + float(p.target_radius_m.get(n, 0.0))) ** 2
+                         for n in self.target_names], dtype=np.float64)
+
     def kernel_tuple(self) -> tuple:
         """The tables as the tuple every kernel takes (see ``_unpack``)."""
         p = self.params
         return (self.n_frames, self.frame_offsets, self.path, self.eff, self.tgt, self.strike_offsets,
                 self.strike_eff, self.strike_w0, self.strike_w1, self.strike_damage, self.defence_w0,
-                self.defence_w1, float(p.contact_radius_m) ** 2, float(p.min_distance_m),
-                int(p.max_event_frames), float(max(p.reach_margin_m, p.contact_radius_m)) ** 2)
+                self.defence_w1, self.contact_radius2(), float(p.min_distance_m),
+                int(p.max_event_frames), float(max(p.reach_margin_m, float(np.sqrt(self.contact_radius2().max())))) ** 2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -281,6 +292,7 @@ def _advance(T, S, act, frm, mask, stats):
                 ez = -s[i] * e[0] + c[i] * e[2] + S[i, 1]
                 go = offs[act[o]] + frm[o]
                 dbest = np.inf
+                touch = False
                 for t in range(nt):
                     q = tgt[go, t]
                     qx = c[o] * q[0] + s[o] * q[2] + S[o, 0]
@@ -291,10 +303,12 @@ def _advance(T, S, act, frm, mask, stats):
                     dd = ddx * ddx + ddy * ddy + ddz * ddz
                     if dd < dbest:
                         dbest = dd
+                    if dd < rad2[t]:
+                        touch = True
                 if dbest < near2 and (nearm & bit) == 0:
                     nearm |= bit
                     stats[ST_NEAR0 + i] += 1.0
-                if dbest < rad2 and not resolved:
+                if touch and not resolved:
                     mask[i] |= bit
                     stats[ST_REACH0 + i] += 1.0
                     ao = act[o]

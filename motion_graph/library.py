@@ -38,8 +38,10 @@ class LibraryParams:
     """Options of a library build (stored in the file)."""
 
     fps: float = 30.0
-    next_threshold_m: float = 0.15   # mean joint distance (m) between end and start poses for a -> b
-    next_velocity_s: float = 0.05    # joint velocity difference weighted by this many seconds
+    next_method: str = "hubs"        # "hubs": pose clusters; "threshold": every pair under the threshold
+    next_threshold_m: float = 0.20   # hubs: max mean joint distance within a pose cluster (m);
+                                     # threshold: max end/start pose distance for a -> b (m)
+    next_velocity_s: float = 0.05    # threshold method: joint velocity difference weighted by this (s)
     segment: SegmentParams = SegmentParams()
     strikes: StrikeParams = StrikeParams()
     classify: ClassifyParams = ClassifyParams()
@@ -259,6 +261,10 @@ class ActionLibrary:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the library (.npz with a JSON header), atomically, with a content checksum."""
+        atomic_write_bytes(path, self.to_bytes())
+
+    def to_bytes(self) -> bytes:
+        """The library file's bytes (what ``save`` writes)."""
         arrays = {k: np.asarray(getattr(self, k)) for k in self._ARRAYS}
         if self.local_translations is not None:
             arrays["local_translations"] = self.local_translations
@@ -273,7 +279,7 @@ class ActionLibrary:
         }
         buf = io.BytesIO()
         np.savez_compressed(buf, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays)
-        atomic_write_bytes(path, buf.getvalue())
+        return buf.getvalue()
 
 
 def _slerp_pair(q_to: np.ndarray, q_from: np.ndarray, w_from: float) -> np.ndarray:
@@ -298,8 +304,17 @@ def load_library(path: str | os.PathLike) -> ActionLibrary:
     path = str(path)
     if not os.path.exists(path):
         raise LibraryFormatError(path, "no such file")
+    return _load_library(path, path)
+
+
+def library_from_bytes(data: bytes, name: str = "<embedded library>") -> ActionLibrary:
+    """A library from the bytes of a library file (e.g. embedded in a graph file)."""
+    return _load_library(io.BytesIO(data), name)
+
+
+def _load_library(src, path: str) -> ActionLibrary:
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with np.load(src, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
     except Exception as e:  # zipfile.BadZipFile, EOFError, ValueError, OSError ...
         raise LibraryFormatError(path, f"not a readable action-library file (truncated or corrupted?): {e}") from None
@@ -513,6 +528,11 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         next_offsets=np.zeros(len(rows) + 1, dtype=np.int64), next_ids=np.zeros(0, dtype=np.int32),
         next_cost=np.zeros(0), meta={"params": params.to_json()},
     )
-    from .graph import compute_next
-    compute_next(lib, params.next_threshold_m, params.next_velocity_s)
+    from .graph import compute_next, compute_next_hubs
+    if params.next_method == "hubs":
+        compute_next_hubs(lib, params.next_threshold_m)
+    elif params.next_method == "threshold":
+        compute_next(lib, params.next_threshold_m, params.next_velocity_s)
+    else:
+        raise ValueError(f"unknown next_method {params.next_method!r} (hubs or threshold)")
     return lib

@@ -154,12 +154,12 @@ def test_straight_punch_at_reach_hits_and_beyond_reach_misses(lib, tables):
         if lib.strike_offsets[a + 1] - lib.strike_offsets[a] != 1 or lib.n_frames[b] <= lib.strike_w1[s] + 1:
             continue
         w, dy = _place_target_at_fist(lib, tables, a, s, b, 0)
-        if dy > 0.6 * tables.params.contact_radius_m:
+        if dy > 0.6 * float(np.sqrt(tables.contact_radius2().min())):
             continue
         tried += 1
         hits, defended, ev = _play_attack(tables, w, int(lib.strike_w1[s]))
         assert hits[0] == 1 and defended.sum() == 0 and hits[1] == 0
-        w_far, _ = _place_target_at_fist(lib, tables, a, s, b, 0, extra_m=0.35)
+        w_far, _ = _place_target_at_fist(lib, tables, a, s, b, 0, extra_m=0.6)
         hits, defended, _ = _play_attack(tables, w_far, int(lib.strike_w1[s]))
         assert hits.sum() == 0 and defended.sum() == 0
         if tried >= 3:
@@ -181,7 +181,7 @@ def test_dodge_inside_its_window_avoids_the_punch(lib, tables):
             if fb < 0 or fb + w1 > dw1 or fb + w1 + 1 >= lib.n_frames[d]:
                 continue
             w, dy = _place_target_at_fist(lib, tables, a, s, d, fb)
-            if dy > 0.6 * tables.params.contact_radius_m:
+            if dy > 0.6 * float(np.sqrt(tables.contact_radius2().min())):
                 continue
             hits, defended, _ = _play_attack(tables, w, w1)
             assert hits[0] == 0 and defended[1] == 1
@@ -199,8 +199,10 @@ def test_dodge_inside_its_window_avoids_the_punch(lib, tables):
 
 
 def test_damage_per_kind_and_contact_radius_are_parameters(lib):
-    t_big = SimTables.from_library(lib, SimParams(contact_radius_m=0.3, damage={"straight": 3.0}))
-    assert t_big.kernel_tuple()[12] == pytest.approx(0.09)
+    t_big = SimTables.from_library(lib, SimParams(contact_radius_m=0.3, damage={"straight": 3.0},
+                                                  target_radius_m={"head": 0.1, "chest": 0.2, "belly": 0.0}))
+    radii = {"head": 0.1, "chest": 0.2, "belly": 0.0}
+    assert t_big.kernel_tuple()[12] == pytest.approx([(0.3 + radii[n]) ** 2 for n in t_big.target_names])
     ks = np.array(lib.strike_kind)
     assert np.all(t_big.strike_damage[ks == KINDS.index("straight")] == 3.0)
     assert np.all(t_big.strike_damage[ks != KINDS.index("straight")] == 1.0)

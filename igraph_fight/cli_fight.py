@@ -1,0 +1,101 @@
+"""`igraph-fight fight` and `igraph-fight policy` (thin: parse, call, print)."""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fight", help="a bout between two Interaction Graph fighters, with artifacts to watch")
+    p.add_argument("--graph", required=True, help="Interaction Graph file (.igz)")
+    p.add_argument("--library", default=None, help="action library (default: the one embedded in the graph)")
+    p.add_argument("--a", default="infighter", help="style of fighter A: preset name or style file (default infighter)")
+    p.add_argument("--b", default="outboxer", help="style of fighter B (default outboxer)")
+    p.add_argument("--depth-a", type=int, default=5, help="min-max depth of A (default 5)")
+    p.add_argument("--depth-b", type=int, default=5, help="min-max depth of B (default 5)")
+    p.add_argument("--swap-a", default=None, metavar="T:STYLE",
+                   help="switch A's style at T seconds (e.g. 30:outboxer)")
+    p.add_argument("--seconds", type=float, default=60.0)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", default="out/fight", help="output folder (default out/fight)")
+    p.add_argument("--physics", action="store_true", help="run the bout in MuJoCo physics (tracker)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=cmd_fight)
+
+    p = sub.add_parser("policy", help="compute a policy table for a style and report its cost")
+    p.add_argument("--graph", required=True)
+    p.add_argument("--style", default="balanced", help="preset name or style file")
+    p.add_argument("--depth", type=int, default=5)
+    p.add_argument("--gamma", type=float, default=None, help="discount (default 1 up to depth 5, else 0.95)")
+    p.add_argument("--repeat", type=int, default=5, help="runs to take the median over (default 5)")
+    p.add_argument("--out", default=None, help="save the policy table (.npz)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_policy)
+
+
+def cmd_fight(args: argparse.Namespace) -> int:
+    if args.physics:
+        try:
+            from tracker.bout import cmd_physics_fight
+        except ModuleNotFoundError:
+            print("igraph-fight: error: physics bouts need tracker.bout (not available in this install)",
+                  file=sys.stderr)
+            return 2
+        return cmd_physics_fight(args)
+    from .bouts import run_style_bout
+
+    swap = None
+    if args.swap_a:
+        t, _, style = args.swap_a.partition(":")
+        swap = (float(t), style)
+    summary = run_style_bout(args.graph, args.a, args.b, args.depth_a, args.depth_b, args.seconds, args.seed,
+                             args.out, library=args.library, swap_a=swap, progress=not args.json)
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    print(f"{summary['a']} (A) vs {summary['b']} (B), {summary['seconds']:.1f} s: hits A {summary['hits_a']:.0f}, "
+          f"hits B {summary['hits_b']:.0f}, score {summary['score']:+.0f}, mean distance "
+          f"{summary['mean_distance_m']:.2f} m")
+    for k, v in summary["artifacts"].items():
+        print(f"  {k}: {v}")
+    return 0
+
+
+def cmd_policy(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from planner import compute_policy, load_style
+
+    from .graph import load_graph
+
+    g = load_graph(args.graph)
+    arrays = dict(g.arrays)
+    from motion_graph.classify import KINDS
+    arrays.setdefault("kinds_table", np.array(KINDS))
+    style = load_style(args.style)
+    gamma = args.gamma if args.gamma is not None else (1.0 if args.depth <= 5 else 0.95)
+    from planner import SearchGraph
+    sg = SearchGraph.from_arrays(arrays["state_offsets"], arrays["edge_target"], arrays["edge_swap"])
+    times, pol = [], None
+    for _ in range(max(1, args.repeat)):
+        pol = compute_policy(arrays, style, args.depth, gamma, search_graph=sg)
+        times.append(pol.compute_ms)
+    assert pol is not None
+    if args.out:
+        from motion_graph.atomic import atomic_write
+        atomic_write(args.out, lambda fh: np.savez(fh, best_me=pol.best_me, best_opp=pol.best_opp, V_me=pol.V_me,
+                                                  V_opp=pol.V_opp, depth=pol.depth, gamma=pol.gamma,
+                                                  style=np.array(style.name)))
+    out = {"n_states": g.n_states, "n_edges": g.n_edges, "style": style.name, "depth": args.depth, "gamma": gamma,
+           "compute_ms": statistics.median(times), "compute_ms_runs": [round(t, 2) for t in times],
+           "search_ms": pol.timings_ms.get("search"), "out": args.out}
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"policy for {style.name} at depth {args.depth} on {g.n_states} states / {g.n_edges} edges: "
+              f"{out['compute_ms']:.1f} ms (median of {len(times)}; search {out['search_ms']:.1f} ms)")
+    return 0

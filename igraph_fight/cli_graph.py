@@ -35,11 +35,11 @@ def register(sub) -> None:
     p.add_argument("--tolerance", type=_pair, default=None, metavar="R_M,DEG",
                    help="snapping tolerance of the clustering (default 0.05,10)")
     p.add_argument("--link-tolerance", type=_pair, default=None, metavar="R_M,DEG",
-                   help="landing tolerance of an edge around its target state (default 0.10,20)")
-    p.add_argument("--f0", type=int, default=None, help="frame window F0 of the other's clip (default 3)")
+                   help="landing tolerance of an edge around its target state (default 0.15,30)")
+    p.add_argument("--f0", type=int, default=None, help="frame window F0 of the other's clip (default 10)")
     p.add_argument("--n-initial", type=int, default=None, help="initial states of the sampler (default 64)")
     p.add_argument("--next-threshold", type=float, default=None,
-                   help="with --mocap: Next(a) pose threshold of the library (m, default 0.15)")
+                   help="with --mocap: Next(a) pose threshold of the library (m, default 0.20)")
     p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler's initial states (default 0)")
     p.add_argument("--workers", type=int, default=1, help="threads (0: all cores); the result does not depend on it")

@@ -28,7 +28,7 @@ def register(sub) -> None:
     p.add_argument("--fps", type=float, default=None, help="override the source frame rate")
     p.add_argument("--library-fps", type=float, default=30.0, help="frame rate of the library (default 30)")
     p.add_argument("--next-threshold", type=float, default=None,
-                   help="pose distance (m) under which a -> b is a transition (default 0.15)")
+                   help="pose-hub size (m): boundary poses within this mean joint distance share a hub, and a -> b when b starts in the hub where a ends (default 0.20)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_segment)
 
@@ -188,8 +188,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     summary = run_demo(args.mocap, args.out, args.seed, progress=sys.stderr.isatty())
-    print(f"demo finished in {summary['seconds']:.1f} s: {summary['n_actions']} actions "
-          f"({', '.join(f'{k} {v}' for k, v in summary['label_counts'].items())})")
+    g, b = summary["graph"], summary["bout"]
+    print(f"demo finished in {summary['seconds']:.1f} s")
+    print(f"  actions: {summary['n_actions']} ({', '.join(f'{k} {v}' for k, v in summary['label_counts'].items())})")
+    print(f"  interaction graph: {g['n_states']} states, {g['n_edges']} edges")
+    print(f"  bout: {b['a']} (A) vs {b['b']} (B): hits {b['hits_a']:.0f} : {b['hits_b']:.0f}, "
+          f"mean distance {b['mean_distance_m']:.2f} m")
+    print("  open the animation in a browser: " + summary["artifacts"].get("bout_animation", "-"))
     for name, path in summary["artifacts"].items():
         print(f"  {name}: {path}")
     return 0

@@ -157,6 +157,26 @@ class FightState:
         self.world = replace(w, x=xs, z=zs, heading=hs)
         return move, abs(dh)
 
+    def snap_full(self, player: int, r: float, theta_self: float, theta_other: float, f_other: int
+                  ) -> tuple[float, float, float, int]:
+        """Snap the whole coupled state onto an Interaction Graph state (the paper's runtime, where
+        both avatars move on the graph): ``player`` moves along the line and turns in place
+        (``snap``), the other turns in place to ``theta_other`` and its clip time moves to frame
+        ``f_other`` (a jump of fewer than F0 frames, same action). Returns (player move m, player
+        turn rad, other turn rad, other frame shift)."""
+        move, turn = self.snap(player, r, theta_self)
+        w = self.world
+        o = 1 - player
+        b = np.arctan2(float(w.x[player] - w.x[o]), float(w.z[player] - w.z[o]))  # bearing other -> player
+        dh = float((b - theta_other - float(w.heading[o]) + np.pi) % (2 * np.pi) - np.pi)
+        hs, fr = w.heading.copy(), w.frame.copy()
+        hs[o] = float(w.heading[o]) + dh
+        nf = int(self.game.tables.n_frames[w.action[o]])
+        shift = int(np.clip(f_other, 0, nf - 2)) - int(fr[o]) if fr[o] < nf - 1 else 0
+        fr[o] += shift
+        self.world = replace(w, heading=hs, frame=fr)
+        return move, turn, abs(dh), shift
+
     # ----- transitions ---------------------------------------------------------------------
     def apply_action(self, action: int) -> EventResult | None:
         """The current player launches ``action``; when no fighter is left to decide the bout runs on

@@ -19,7 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     cli_mocap.register(sub)
-    for modname in ("igraph_fight.cli_graph", "igraph_fight.cli_fight", "tracker.cli"):
+    for modname in ("igraph_fight.cli_graph", "igraph_fight.cli_fight", "igraph_fight.cli_eval", "tracker.cli"):
         try:
             mod = __import__(modname, fromlist=["register"])
         except ModuleNotFoundError as e:

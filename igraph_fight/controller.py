@@ -41,6 +41,7 @@ from motion_graph.classify import KINDS
 from planner import Policy, SearchGraph, Style, compute_policy, load_style
 
 from .graph import InteractionGraph, load_graph
+from .sim import _expand_one
 
 
 class Observation(NamedTuple):
@@ -83,46 +84,259 @@ class _Table:
     depth: int
     version: int
     style_obj: Style
+    la: tuple = ()           # what the off-graph lookahead kernel reads (values, kind preferences, weights)
 
 
-@njit(cache=True)
+# ----- nearest-state index -------------------------------------------------------------------
+# The index (built by _build_index), with key = (Next-set id * (A+1) + M_other) * mask_mod + mask
+# and kidx the rank of the key among the sorted ``ukeys``:
+#   level 0 (the compatible group): a state with frame F_other is copied into the slots
+#     (kidx, F) of every frame F with |F - F_other| < f0 (slot kidx * fw + F + f0 - 1), so a query
+#     reads one slot (states of frames that are not compatible are skipped by the scan); a slot
+#     is split into _NB2 angle bins (theta_self x theta_other); ``rowsw`` (rows, 4) float64 =
+#     (r, theta_self, theta_other, F_other * 2^32 + state id) sorted by (slot, bin, r) (two rows
+#     per cache line); ``ctabw[slot * _NB2 + bin, c]`` is the bin's first row with r >= c * cell_w
+#     (c = 0..ncell-1) and ``ctabw[., ncell]`` its end: one table read and a short walk find the
+#     query's place instead of a binary search (this machine's memory is slow: a cache miss
+#     costs ~0.4 us, a binary search ~10 of them). The query's own bin is read first, then only
+#     the bins whose angle distance alone can still beat the best so far;
+#   level 1 (same key, any frame): ``rowsk`` / ``ctabk`` likewise with one slot per key;
+#   level 2 (same Next-set): SoA rows sorted by (Next-set id, angle bin, r), bucket starts ``bst2``
+#     (per Next-set id of ``nkeys``, _NB2 bins of (theta_self, theta_other));
+#   level 3 (anywhere): SoA rows sorted by (angle bin, r), bucket starts ``bst3``; the query's own
+#     bin is read first, then only the bins whose angle distance alone can still beat the best.
+# ``xf`` (6, S) float64 = (r, theta_self, theta_other) in the level-2 order, then the level-3
+# order; ``xi`` (3, S) int64 = their state ids and each state's position in key order;
+# ``strt`` (S, 3) = (r, theta_self, theta_other) by state id (the tolerance test).
+# Nearest = smallest squared normalised distance dr^2/s_r^2 + (dts^2 + dto^2)/s_theta^2 (angle
+# differences wrapped). Rows are visited outwards from the query's r in order of |dr| and the
+# walk stops when dr^2/s_r^2 alone exceeds the best so far: the result is the exact minimum.
+# Ties go to the smaller state id (levels 0-2) or the earlier in key order (level 3), i.e. what
+# a linear scan of the states in key order finds.
+
+@njit(cache=True, inline="always")
 def _wrap(a):
     return a - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))
 
 
 @njit(cache=True)
-def _nearest(keys, order, by_next_keys, by_next_order, st_r, st_ts, st_to, st_f, key, nextset, f_other, f0,
-             r, ts, to, inv_sr2, inv_st2):
-    """Nearest state: compatible group first, then same key any frame, same menu, anywhere.
-    Returns (state, squared normalised distance, level 0..3)."""
-    for level in range(4):
-        if level <= 1:
-            lo = np.searchsorted(keys, key, side="left")
-            hi = np.searchsorted(keys, key, side="right")
-            idx = order
-        elif level == 2:
-            lo = np.searchsorted(by_next_keys, nextset, side="left")
-            hi = np.searchsorted(by_next_keys, nextset, side="right")
-            idx = by_next_order
+def _scan_rows(rows, lo, hi, p, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi, lbt):
+    """Nearest among rows[lo:hi] (sorted by r; p = about the first row with r >= the query's r)
+    whose F_other lies in [flo, fhi]; rows = (r, theta_self, theta_other, F_other * 2^32 + id);
+    ``lbt`` a lower bound of the rows' angle term (their angle bin's distance)."""
+    while p > lo and rows[p - 1, 0] >= r:
+        p -= 1
+    while p < hi and rows[p, 0] < r:
+        p += 1
+    dn = p - 1
+    up = p
+    while dn >= lo or up < hi:
+        if up >= hi or (dn >= lo and r - rows[dn, 0] <= rows[up, 0] - r):
+            k = dn
+            dn -= 1
         else:
-            lo = 0
-            hi = len(order)
-            idx = order
-        best = -1
-        bd = np.inf
-        for k in range(lo, hi):
-            s = idx[k]
-            if level == 0 and abs(st_f[s] - f_other) >= f0:
+            k = up
+            up += 1
+        dr = rows[k, 0] - r
+        d0 = dr * dr * inv_sr2
+        if d0 + lbt > bd:
+            break  # every row left is at least this far
+        tag = np.int64(rows[k, 3])
+        f = tag >> 32
+        if f < flo or f > fhi:
+            continue
+        d1 = _wrap(rows[k, 1] - ts)
+        d2 = _wrap(rows[k, 2] - to)
+        d = d0 + (d1 * d1 + d2 * d2) * inv_st2
+        s = tag & 0xFFFFFFFF
+        if d < bd or (d == bd and s < best):
+            bd = d
+            best = s
+    return best, bd
+
+
+@njit(cache=True)
+def _scan_soa(st, sr, sts, sto, rank, use_rank, lo, hi, r, ts, to, inv_sr2, inv_st2, best, bd, bt, lbt):
+    """Nearest among SoA rows [lo, hi) sorted by r (levels 2 and 3); ties to the smaller tie value
+    (the state id, or ``rank[state]`` with ``use_rank``). ``lbt``: a lower bound of the angle
+    term of every row (their angle bin's distance). Returns (state, distance, tie value)."""
+    a = lo
+    b = hi
+    while a < b:
+        m = (a + b) >> 1
+        if sr[m] < r:
+            a = m + 1
+        else:
+            b = m
+    dn = a - 1
+    up = a
+    while dn >= lo or up < hi:
+        if up >= hi or (dn >= lo and r - sr[dn] <= sr[up] - r):
+            k = dn
+            dn -= 1
+        else:
+            k = up
+            up += 1
+        dr = sr[k] - r
+        d0 = dr * dr * inv_sr2
+        if d0 + lbt > bd:
+            break
+        d1 = _wrap(sts[k] - ts)
+        d2 = _wrap(sto[k] - to)
+        d = d0 + (d1 * d1 + d2 * d2) * inv_st2
+        s = st[k]
+        t = rank[s] if use_rank else s
+        if d < bd or (d == bd and t < bt):
+            bd = d
+            best = s
+            bt = t
+    return best, bd, bt
+
+
+#: Angle bins of the level-2/3 rows: (theta_self, theta_other) in _NBA x _NBA bins of 2 pi / _NBA.
+_NBA = 8
+_NB2 = _NBA * _NBA
+
+
+@njit(cache=True, inline="always")
+def _angle_bin(a):
+    w = 2.0 * np.pi / _NBA
+    b = int(np.floor((a + np.pi - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))) / w))
+    return min(max(b, 0), _NBA - 1)
+
+
+@njit(cache=True, inline="always")
+def _bin_gap(a, b):
+    """Lower bound of |wrapped difference| between angle a and any angle of bin b (rad)."""
+    w = 2.0 * np.pi / _NBA
+    lo = b * w - np.pi
+    d = _wrap(a - lo)
+    if 0.0 <= d < w:
+        return 0.0
+    g = min(abs(d), abs(_wrap(a - lo - w)))
+    return max(g - 1e-9, 0.0)
+
+
+@njit(cache=True)
+def _scan_bins(st, sr, sts, sto, rank, use_rank, bst, base, r, ts, to, inv_sr2, inv_st2, best, bd, bt):
+    """Nearest among the rows of the _NB2 angle bins bst[base:base + _NB2 + 1] (each sorted by
+    r): the query's own bin first, then every bin whose angle distance alone does not exceed
+    the best so far."""
+    qs = _angle_bin(ts)
+    qo = _angle_bin(to)
+    own = qs * _NBA + qo
+    best, bd, bt = _scan_soa(st, sr, sts, sto, rank, use_rank, bst[base + own], bst[base + own + 1], r, ts, to,
+                             inv_sr2, inv_st2, best, bd, bt, 0.0)
+    for bs in range(_NBA):
+        gs = _bin_gap(ts, bs)
+        gs2 = gs * gs * inv_st2
+        if gs2 > bd:
+            continue
+        for bo in range(_NBA):
+            b = bs * _NBA + bo
+            if b == own or bst[base + b] == bst[base + b + 1]:
                 continue
-            dr = st_r[s] - r
-            d1 = _wrap(st_ts[s] - ts)
-            d2 = _wrap(st_to[s] - to)
-            d = dr * dr * inv_sr2 + (d1 * d1 + d2 * d2) * inv_st2
-            if d < bd:
-                bd = d
-                best = s
+            go = _bin_gap(to, bo)
+            lbt = gs2 + go * go * inv_st2
+            if lbt > bd:
+                continue
+            best, bd, bt = _scan_soa(st, sr, sts, sto, rank, use_rank, bst[base + b], bst[base + b + 1], r, ts, to,
+                                     inv_sr2, inv_st2, best, bd, bt, lbt)
+    return best, bd, bt
+
+
+@njit(cache=True, inline="always")
+def _lower(a, x, lo, hi):
+    """First index in [lo, hi) of sorted ``a`` with a[i] >= x."""
+    while lo < hi:
+        m = (lo + hi) >> 1
+        if a[m] < x:
+            lo = m + 1
+        else:
+            hi = m
+    return lo
+
+
+@njit(cache=True, inline="always")
+def _cell_scan(rows, ctab, slot, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi, lbt):
+    lo = ctab[slot, 0]
+    hi = ctab[slot, ncell]
+    if lo == hi:
+        return best, bd
+    c = int(r / cell_w) if r > 0.0 else 0
+    if c >= ncell:
+        p = hi
+    else:
+        p = ctab[slot, c]
+        e = ctab[slot, c + 1]
+        while p < e and rows[p, 0] < r:
+            p += 1
+    return _scan_rows(rows, lo, hi, p, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi, lbt)
+
+
+@njit(cache=True)
+def _slot_scan(rows, ctab, slot, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi):
+    """Nearest in a slot's _NB2 angle bins (ctab rows slot * _NB2 + bin): the query's own bin
+    first, then only the bins whose angle distance alone can still beat the best."""
+    qs = _angle_bin(ts)
+    qo = _angle_bin(to)
+    base = slot * _NB2
+    own = qs * _NBA + qo
+    best, bd = _cell_scan(rows, ctab, base + own, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi,
+                          0.0)
+    for bs in range(_NBA):
+        gs = _bin_gap(ts, bs)
+        gs2 = gs * gs * inv_st2
+        if gs2 > bd:
+            continue
+        for bo in range(_NBA):
+            b = bs * _NBA + bo
+            if b == own:
+                continue
+            go = _bin_gap(to, bo)
+            lbt = gs2 + go * go * inv_st2
+            if lbt > bd or ctab[base + b, 0] == ctab[base + b, ncell]:
+                continue
+            best, bd = _cell_scan(rows, ctab, base + b, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best, bd, flo, fhi,
+                                  lbt)
+    return best, bd
+
+
+@njit(cache=True)
+def _nearest(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, nkeys, bst2, bst3, key, nextset,
+             f_other, f0, r, ts, to, inv_sr2, inv_st2):
+    """Nearest state: compatible group first (same key, |F_other difference| < f0), then same
+    key any frame, same menu, anywhere (see the index notes above). Returns (state, squared
+    normalised distance, level 0..3); (-1, inf, 4) for an empty graph."""
+    best = -1
+    bd = np.inf
+    kidx = _lower(ukeys, key, 0, ukeys.shape[0])
+    if kidx < ukeys.shape[0] and ukeys[kidx] == key:
+        # level 0: the compatible group, one r-sorted slot per (key, F_other)
+        q = (f_other + f0 - 1) // f0
+        if f_other + f0 - 1 >= 0 and q < nblock:
+            best, bd = _slot_scan(rowsw, ctabw, kidx * nblock + q, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best,
+                                  bd, f_other - f0 + 1, f_other + f0 - 1)
         if best >= 0:
-            return best, bd, level
+            return best, bd, 0
+        # level 1: every frame of the key
+        best, bd = _slot_scan(rowsk, ctabk, kidx, ncell, cell_w, r, ts, to, inv_sr2, inv_st2, best, bd,
+                              -(np.int64(1) << 40), np.int64(1) << 40)
+        if best >= 0:
+            return best, bd, 1
+    # level 2: same Next-set
+    bt = np.int64(1) << 62
+    j = _lower(nkeys, nextset, 0, nkeys.shape[0])
+    if j < nkeys.shape[0] and nkeys[j] == nextset:
+        best, bd, bt = _scan_bins(xi[0], xf[0], xf[1], xf[2], xi[2], False, bst2, j * _NB2, r, ts, to, inv_sr2,
+                                  inv_st2, best, bd, bt)
+    if best >= 0:
+        return best, bd, 2
+    # level 3: anywhere
+    best, bd, bt = _scan_bins(xi[1], xf[3], xf[4], xf[5], xi[2], True, bst3, 0, r, ts, to, inv_sr2, inv_st2, best,
+                              bd, bt)
+    if best >= 0:
+        return best, bd, 3
     return -1, np.inf, 4
 
 
@@ -145,42 +359,241 @@ def _choose(s, best_me, q_me, offsets, edge_action, legal_row):
     return -1, -1
 
 
+# The kernels take the controller's static arrays as few arguments (numba's dispatch costs
+# about 0.1-0.2 us per argument, a sizeable part of a table decision): ``pi`` int64 = a header
+# of part offsets, then the parts named in _INT_PARTS; ``pf`` float64 = (inv_sr2, inv_st2,
+# tol_r, tol_theta, cell_w); IX = (rows0, ctab, xf, xi, strt).
+_INT_PARTS = ("ukeys", "nkeys", "bst2", "nextset_of", "key_args", "menu_off", "menu_ids", "offsets",
+              "edge_action", "kinds", "scalars", "bst3")  # scalars = (f0, number of frame blocks, ncell)
+
+
+def _pack_ints(parts: dict) -> np.ndarray:
+    arrs = [np.asarray(parts[k], dtype=np.int64).ravel() for k in _INT_PARTS]
+    head = len(arrs) + 1
+    off = head + np.concatenate([[0], np.cumsum([len(x) for x in arrs])])
+    return np.ascontiguousarray(np.concatenate([off.astype(np.int64), *arrs]), dtype=np.int64)
+
+
+@njit(cache=True, inline="always")
+def _part(pi, i):
+    return pi[pi[i]:pi[i + 1]]
+
+
 @njit(cache=True)
-def _act_one(keys, order, by_next_keys, by_next_order, st_r, st_ts, st_to, st_f, nextset_of, key_of_args,
-             f0, inv_sr2, inv_st2, tol_r, tol_t, best_me, q_me, offsets, edge_action, legal, menu_off, menu_ids,
-             r, ts, to, m_self, m_other, f_other, mask, out):
+def _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, r, ts, to, m_self, m_other, f_other, mask):
+    """(state, squared normalised distance, level, off_graph) of a live state."""
+    sc = _part(pi, 10)
+    nextset_of = _part(pi, 3)
+    key_args = _part(pi, 4)
     ns = nextset_of[m_self]
-    key = (ns * key_of_args[0] + m_other) * key_of_args[1] + mask
-    s, d2, level = _nearest(keys, order, by_next_keys, by_next_order, st_r, st_ts, st_to, st_f, key, ns, f_other,
-                            f0, r, ts, to, inv_sr2, inv_st2)
-    e, a = _choose(s, best_me, q_me, offsets, edge_action, legal[m_self])
-    if a < 0:
-        a = menu_ids[menu_off[m_self]]
+    key = (ns * key_args[0] + m_other) * key_args[1] + mask
+    s, d2, level = _nearest(rowsw, ctabw, rowsk, ctabk, _part(pi, 0), sc[1], sc[2], pf[4], xf, xi, _part(pi, 1),
+                            _part(pi, 2), _part(pi, 11), key, ns, f_other, sc[0], r, ts, to, pf[0], pf[1])
     off = level > 0
     if s >= 0 and level == 0:
-        off = (abs(st_r[s] - r) > tol_r or abs(_wrap(st_ts[s] - ts)) > tol_t or abs(_wrap(st_to[s] - to)) > tol_t)
-    out[0] = a
-    out[1] = s
-    out[2] = e
-    out[3] = 1 if off else 0
-    return np.sqrt(d2)
+        off = (abs(strt[s, 0] - r) > pf[2] or abs(_wrap(strt[s, 1] - ts)) > pf[3]
+               or abs(_wrap(strt[s, 2] - to)) > pf[3])
+    return s, d2, level, off
 
 
-@njit(cache=True, parallel=True)
-def _act_batch(keys, order, by_next_keys, by_next_order, st_r, st_ts, st_to, st_f, nextset_of, key_of_args,
-               f0, inv_sr2, inv_st2, tol_r, tol_t, best_me, q_me, offsets, edge_action, legal, menu_off, menu_ids,
-               r, ts, to, m_self, m_other, f_other, mask, out, dist):
+@njit(cache=True)
+def _decide(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, r, ts, to, m_self, m_other,
+            f_other, mask):
+    """Table decision: (action, state, normalised distance, off_graph, edge)."""
+    s, d2, level, off = _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, r, ts, to, m_self, m_other,
+                                  f_other, mask)
+    e, a = _choose(s, best_me, q_me, _part(pi, 7), _part(pi, 8), legal[m_self])
+    if a < 0:
+        a = _part(pi, 6)[_part(pi, 5)[m_self]]
+    return a, s, np.sqrt(d2), off, e
+
+
+@njit(cache=True)
+def _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self,
+               m_other, f_other, mask):
+    """Off-graph decision: simulate every legal action once from the live state (sim._expand_one)
+    and score it by its Eq. 4 reward for the decider (the W_me of planner.rewards) plus gamma
+    times the policy's depth-(D-1) value of the graph state nearest to where it lands.
+    rw = (d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second, distance is "mean",
+    gamma, fps). Returns (best action, its score); (-1, 0) without legal actions."""
+    sc = _part(pi, 10)
+    nextset_of = _part(pi, 3)
+    key_args = _part(pi, 4)
+    menu_off = _part(pi, 5)
+    menu_ids = _part(pi, 6)
+    kinds = _part(pi, 9)
+    d_p, w_theta, w_d, w_g, w_r, w_def = rw[0], rw[1], rw[2], rw[3], rw[4], rw[5]
+    per_second = rw[6] != 0.0
+    use_mean = rw[7] != 0.0
+    gamma = rw[8]
+    fps = rw[9]
+    lo = menu_off[m_self]
+    hi = menu_off[m_self + 1]
+    if hi <= lo:
+        return -1, 0.0
+    si = np.empty(4, dtype=np.int64)
+    sf = np.empty(3)
+    si[0] = m_self
+    si[1] = m_other
+    si[2] = f_other
+    si[3] = mask
+    sf[0] = r
+    sf[1] = ts
+    sf[2] = to
+    ci = np.empty(4, dtype=np.int64)
+    cf = np.empty(3)
+    ft = np.empty(16)
+    S = np.empty((2, 3))
+    act = np.empty(2, dtype=np.int64)
+    frm = np.empty(2, dtype=np.int64)
+    msk = np.empty(2, dtype=np.int64)
+    stats = np.empty(13)
+    best_a = -1
+    best_q = -np.inf
+    npref = pref.shape[0]
+    for j in range(lo, hi):
+        a = menu_ids[j]
+        swap = _expand_one(T, si, sf, a, ci, cf, ft, S, act, frm, msk, stats)
+        rr = ft[2] if use_mean else ft[1]          # sim.FT_R_MEAN / sim.FT_R
+        dd = rr - d_p
+        pos = w_theta * ft[3] * ft[3] + w_d * dd * dd
+        if per_second:
+            pos *= ft[0] / fps
+        k = kinds[a]
+        pk = pref[k] if 0 <= k < npref else 1.0
+        w = -pos + w_g * ft[5] * pk - w_r * ft[6] + w_def * ft[7]
+        ns = nextset_of[ci[0]]
+        key = (ns * key_args[0] + ci[1]) * key_args[1] + ci[3]
+        s, _, _ = _nearest(rowsw, ctabw, rowsk, ctabk, _part(pi, 0), sc[1], sc[2], pf[4], xf, xi, _part(pi, 1),
+                           _part(pi, 2), _part(pi, 11), key, ns, ci[2], sc[0], cf[0], cf[1], cf[2], pf[0], pf[1])
+        v = 0.0
+        if s >= 0:
+            v = np.float64(V_opp_next[s]) if swap else np.float64(V_me_next[s])
+        q = w + gamma * v
+        if q > best_q:
+            best_q = q
+            best_a = a
+    return best_a, best_q
+
+
+def _act_batch_py(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, V_me_next, V_opp_next,
+                  pref, rw, lookahead, r, ts, to, m_self, m_other, f_other, mask, out, dist):
     for i in prange(len(r)):
-        dist[i] = _act_one(keys, order, by_next_keys, by_next_order, st_r, st_ts, st_to, st_f, nextset_of,
-                           key_of_args, f0, inv_sr2, inv_st2, tol_r, tol_t, best_me, q_me, offsets, edge_action,
-                           legal, menu_off, menu_ids, r[i], ts[i], to[i], m_self[i], m_other[i], f_other[i],
-                           mask[i], out[i])
+        a, s, d, off, e = _decide(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, r[i], ts[i],
+                                  to[i], m_self[i], m_other[i], f_other[i], mask[i])
+        if lookahead and off:
+            la, _ = _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_next, pref, rw, r[i],
+                               ts[i], to[i], m_self[i], m_other[i], f_other[i], mask[i])
+            if la >= 0:
+                a = la
+                e = -1
+        out[i, 0] = a
+        out[i, 1] = s
+        out[i, 2] = e
+        out[i, 3] = 1 if off else 0
+        dist[i] = d
+
+
+#: act_batch runs batches smaller than this on the calling thread (a parallel region costs a
+#: thread wake-up, milliseconds on a busy machine).
+PARALLEL_MIN = 4096
+_act_batch = njit(cache=True, parallel=True)(_act_batch_py)
+_act_batch_serial = njit(cache=True)(_act_batch_py)
+
+
+def _r_slots(slot: np.ndarray, r: np.ndarray, ts: np.ndarray, to: np.ndarray, sid: np.ndarray, f: np.ndarray,
+             nslot: int, ncell: int, cell_w: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (r, theta_self, theta_other, F_other * 2^32 + state id) sorted by (slot, r) and their
+    cell table."""
+    o = np.lexsort((sid, r, slot))
+    tag = (f[o].astype(np.int64) << 32) + sid[o]
+    rows = np.ascontiguousarray(np.stack([r[o], ts[o], to[o], tag.astype(np.float64)], axis=1))
+    cell = np.minimum((r[o] / cell_w).astype(np.int64), ncell - 1)
+    counts = np.bincount(slot[o] * ncell + cell, minlength=nslot * ncell).reshape(nslot, ncell)
+    ctab = np.empty((nslot, ncell + 1), dtype=np.int64)
+    ctab[:, ncell] = np.cumsum(counts.sum(axis=1))
+    ctab[:, 0] = ctab[:, ncell] - counts.sum(axis=1)
+    ctab[:, 1:ncell] = ctab[:, :1] + np.cumsum(counts, axis=1)[:, :-1]
+    return rows, np.ascontiguousarray(ctab, dtype=np.int32 if len(o) < 2 ** 31 - 1 else np.int64)
+
+
+def _angle_bins(a: np.ndarray) -> np.ndarray:
+    """_angle_bin for arrays (the same arithmetic)."""
+    w = 2.0 * np.pi / _NBA
+    b = np.floor((a + np.pi - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))) / w).astype(np.int64)
+    return np.clip(b, 0, _NBA - 1)
+
+
+def _build_index(a: dict, n_actions: int, mask_mod: int, f0: int, ncell: int = 8) -> tuple:
+    """The nearest-state index (notes above): returns (rowsw, ctabw, rowsk, ctabk, xf, xi, strt),
+    the int parts (ukeys, nkeys, bst2, bst3, fm = number of frame blocks, ncell) and the cell
+    width (m)."""
+    S = len(a["state_r"])
+    r = np.ascontiguousarray(a["state_r"], dtype=np.float64)
+    ts = np.ascontiguousarray(a["state_theta_self"], dtype=np.float64)
+    to = np.ascontiguousarray(a["state_theta_other"], dtype=np.float64)
+    f = a["state_f_other"].astype(np.int64)
+    ns = a["state_nextset"].astype(np.int64)
+    key = ((ns * (n_actions + 1) + a["state_m_other"].astype(np.int64)) * mask_mod
+           + a["state_mask_other"].astype(np.int64))
+    fm = int(f.max()) + 1 if S else 1
+    ukeys, kidx = np.unique(key, return_inverse=True)
+    kidx = kidx.astype(np.int64).ravel()
+    sid = np.arange(S, dtype=np.int64)
+    cell_w = float(r.max()) / ncell + 1e-9 if S else 1.0
+    # level 0: frames in blocks of f0 (shifted by f0 - 1); a query at F reads block
+    # (F + f0 - 1) // f0, which holds every state compatible with any frame of the block
+    # (|F_other difference| < f0); the scan skips the others. Each state is in about 3 blocks.
+    fs = f + f0 - 1
+    nblock = (fm + 2 * (f0 - 1)) // f0 + 1
+    qs, ids = [], []
+    for dq in range(-2, 3):
+        q = (fs + f0 - 1) // f0 + dq - 1
+        ok = (q >= 0) & (q < nblock) & (q * f0 - f0 + 1 <= fs) & (fs <= q * f0 + 2 * f0 - 2)
+        qs.append(q[ok])
+        ids.append(sid[ok])
+    qw = np.concatenate(qs)
+    iw = np.concatenate(ids)
+    ab = _angle_bins(ts) * _NBA + _angle_bins(to)
+    rowsw, ctabw = _r_slots((kidx[iw] * nblock + qw) * _NB2 + ab[iw], r[iw], ts[iw], to[iw], iw, f[iw],
+                            len(ukeys) * nblock * _NB2, ncell, cell_w)
+    rowsk, ctabk = _r_slots(kidx * _NB2 + ab, r, ts, to, sid, f, len(ukeys) * _NB2, ncell, cell_w)
+    nkeys, ninv = np.unique(ns, return_inverse=True)
+    g2 = ninv.astype(np.int64).ravel() * _NB2 + ab
+    o2 = np.lexsort((r, g2))
+    bst2 = np.concatenate([[0], np.cumsum(np.bincount(g2, minlength=len(nkeys) * _NB2))]).astype(np.int64)
+    rank = np.empty(S, dtype=np.int64)
+    rank[np.argsort(key, kind="stable")] = np.arange(S)
+    o3 = np.lexsort((rank, r, ab))
+    bst3 = np.concatenate([[0], np.cumsum(np.bincount(ab, minlength=_NB2))]).astype(np.int64)
+    xf = np.ascontiguousarray(np.stack([r[o2], ts[o2], to[o2], r[o3], ts[o3], to[o3]]) if S else np.zeros((6, 0)))
+    xi = np.ascontiguousarray(np.stack([o2, o3, rank]).astype(np.int64) if S else np.zeros((3, 0), np.int64))
+    strt = np.ascontiguousarray(np.stack([r, ts, to], axis=1))
+    return ((rowsw, ctabw, rowsk, ctabk, xf, xi, strt),
+            dict(ukeys=ukeys.astype(np.int64), nkeys=nkeys.astype(np.int64), bst2=bst2, bst3=bst3, fm=nblock,
+                 ncell=ncell), cell_w)
 
 
 def _edge_q(policy: Policy, offsets: np.ndarray, target: np.ndarray, swap: np.ndarray) -> np.ndarray:
     """Score of every edge for the controlled fighter deciding: W_me + gamma * V_next(target)."""
+    if policy.W2 is not None and policy.search_graph is not None:
+        # straight from the packed rewards (no unpacking of W_me / W_opp: half the swap time)
+        out = np.empty(len(target), dtype=np.float32)
+        _edge_q_kernel(policy.W2, policy.search_graph.edge_rank, target, swap, policy.V_me_next, policy.V_opp_next,
+                       np.float32(policy.gamma), out)
+        return out
     v_next = np.where(swap.astype(bool), policy.V_opp_next[target], policy.V_me_next[target])
     return (policy.W_me + np.float32(policy.gamma) * v_next).astype(np.float32)
+
+
+@njit(cache=True)
+def _edge_q_kernel(W2, edge_rank, target, swap, V_me_next, V_opp_next, g, out):
+    """out[e] = W_me[e] + g * (V_opp_next if swap else V_me_next)[target[e]], in float32 as the
+    numpy expression computes it; W_me[e] = W2[2 * edge_rank[e]] (planner's packed layout)."""
+    for e in range(target.shape[0]):
+        t = target[e]
+        v = V_opp_next[t] if swap[e] else V_me_next[t]
+        out[e] = np.float32(W2[2 * edge_rank[e]]) + np.float32(g * np.float32(v))
 
 
 class NPCController:
@@ -222,19 +635,13 @@ class NPCController:
         self._inv_sr2, self._inv_st2 = 1.0 / s_r ** 2, 1.0 / s_t ** 2
         self.tol_r = float(opts.get("link_tol_r_m", 0.1))
         self.tol_theta = float(opts.get("link_tol_theta_rad", np.radians(20)))
-        # Lookup index: states sorted by (Next-set id, M_other, mask) and by Next-set id alone.
+        # Lookup index (see _build_index): states bucketed by (Next-set id, M_other, mask, F_other)
+        # and by Next-set id, each bucket sorted by r.
         A = library.n_actions
         self._nextset_of = _nextset_ids(library)
         mask_mod = int(a["state_mask_other"].max()) + 2 if len(a["state_mask_other"]) else 2
         self._key_args = np.array([A + 1, mask_mod], dtype=np.int64)
-        key = (a["state_nextset"].astype(np.int64) * (A + 1) + a["state_m_other"]) * mask_mod + a["state_mask_other"]
-        self._order = np.argsort(key, kind="stable").astype(np.int64)
-        self._keys = key[self._order]
-        nk = a["state_nextset"].astype(np.int64)
-        self._by_next_order = np.argsort(nk, kind="stable").astype(np.int64)
-        self._by_next_keys = nk[self._by_next_order]
-        self._st = tuple(np.ascontiguousarray(a[k], dtype=np.float64) for k in
-                         ("state_r", "state_theta_self", "state_theta_other")) + (a["state_f_other"].astype(np.int64),)
+        self._ix, ix_parts, cell_w = _build_index(a, A, mask_mod, self.f0)
         self._offsets = a["state_offsets"].astype(np.int64)
         self._edge_action = a["edge_action"].astype(np.int64)
         self._target = a["edge_target"].astype(np.int64)
@@ -250,6 +657,13 @@ class NPCController:
         sim_opts = graph.header.get("options", {}).get("sim")
         self.tables = SimTables.from_library(library, SimParams(**sim_opts) if sim_opts else SimParams())
         self._T = self.tables.kernel_tuple()
+        self._kinds = np.asarray(self.tables.kinds, dtype=np.int64)
+        self._pi = _pack_ints(dict(ukeys=ix_parts["ukeys"], nkeys=ix_parts["nkeys"], bst2=ix_parts["bst2"],
+                                   bst3=ix_parts["bst3"],
+                                   nextset_of=self._nextset_of, key_args=self._key_args, menu_off=self._menu_off,
+                                   menu_ids=self._menu_ids, offsets=self._offsets, edge_action=self._edge_action,
+                                   kinds=self._kinds, scalars=[self.f0, ix_parts["fm"], ix_parts["ncell"]]))
+        self._pf = np.array([self._inv_sr2, self._inv_st2, self.tol_r, self.tol_theta, cell_w], dtype=np.float64)
         self.stochastic = stochastic
         self.temperature = float(temperature)
         self.usage_penalty = float(usage_penalty)
@@ -281,7 +695,13 @@ class NPCController:
         with self._lock:
             self._version += 1
             v = self._version
-        return _Table(pol, pol.best_me.astype(np.int64), q, style.name, depth, v, style)
+        from planner import kind_preferences
+        rw = np.array([style.d_p, style.w_theta, style.w_d, style.w_dmg_given, style.w_dmg_received, style.w_def,
+                       float(style.per_second), float(style.distance == "mean"), float(pol.gamma),
+                       float(self.tables.fps)], dtype=np.float64)
+        la = (np.ascontiguousarray(pol.V_me_next), np.ascontiguousarray(pol.V_opp_next),
+              kind_preferences(style, [str(k) for k in self._arrays["kinds_table"]]), rw)
+        return _Table(pol, pol.best_me.astype(np.int64), q, style.name, depth, v, style, la)
 
     @property
     def style(self) -> str:
@@ -318,57 +738,38 @@ class NPCController:
         return fut
 
     # ----- decisions ------------------------------------------------------------------------
-    def _args(self, table: _Table) -> tuple:
-        return (self._keys, self._order, self._by_next_keys, self._by_next_order, *self._st, self._nextset_of,
-                self._key_args, self.f0, self._inv_sr2, self._inv_st2, self.tol_r, self.tol_theta, table.best_me,
-                table.q_me, self._offsets, self._edge_action, self._legal, self._menu_off, self._menu_ids)
+    def _lookahead(self, table: _Table, obs: Observation) -> tuple[int, float]:
+        """One exact simulated event per legal action + the graph value where it lands."""
+        a, q = _lookahead(self._T, self._pi, self._pf, *self._ix[:6], *table.la, float(obs.r), float(obs.theta_self),
+                          float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
+                          int(obs.mask_other))
+        return int(a), float(q)
 
     def act(self, obs: Observation) -> Decision:
         """The action for one live state (see the module docstring)."""
         table = self._table  # one read: a consistent snapshot
-        out = np.empty(4, dtype=np.int64)
-        d = _act_one(*self._args(table), float(obs.r), float(obs.theta_self), float(obs.theta_other),
-                     int(obs.m_self), int(obs.m_other), int(obs.f_other), int(obs.mask_other), out)
-        if out[3] and self.offgraph == "lookahead":
-            a, v = self._lookahead(table, obs)
-            if a >= 0:
-                out[0], out[2] = a, -1
-        elif self.stochastic and out[1] >= 0:
-            e = self._roulette(table, int(out[1]), int(obs.m_self))
-            if e >= 0:
-                out[2], out[0] = e, self._edge_action[e]
-        if out[2] >= 0:
-            self._usage[out[2]] += 1
-        return Decision(int(out[0]), int(out[1]), float(d), bool(out[3]), int(out[2]))
+        a, s, d, off, e = _decide(self._pi, self._pf, *self._ix, self._legal, table.best_me, table.q_me,
+                                  float(obs.r), float(obs.theta_self), float(obs.theta_other), int(obs.m_self),
+                                  int(obs.m_other), int(obs.f_other), int(obs.mask_other))
+        if off and self.offgraph == "lookahead":
+            la, _ = self._lookahead(table, obs)
+            if la >= 0:
+                a, e = la, -1
+        elif self.stochastic and s >= 0:
+            re = self._roulette(table, s, int(obs.m_self))
+            if re >= 0:
+                e, a = re, int(self._edge_action[re])
+        if e >= 0:
+            self._usage[e] += 1
+        return Decision(a, s, d, off, e)
 
-    def _lookahead(self, table: _Table, obs: Observation) -> tuple[int, float]:
-        """One exact simulated event per legal action + the graph value where it lands."""
-        from planner import edge_rewards
-
-        from . import sim
-        from .edge_features import edge_features
-
-        acts = self.library.next(int(obs.m_self)).astype(np.int64)
-        if len(acts) == 0:
-            return -1, 0.0
-        si = np.array([[obs.m_self, obs.m_other, obs.f_other, obs.mask_other]], dtype=np.int64)
-        sf = np.array([[obs.r, obs.theta_self, obs.theta_other]], dtype=np.float64)
-        ci, cf, ft, swap = sim.expand_samples(self._T, si, sf, np.zeros(len(acts), dtype=np.int64), acts)
-        feats = edge_features(self.tables, np.full(len(acts), obs.m_other), acts, ft)
-        w_me, _ = edge_rewards(feats, table.style_obj, list(KINDS))
-        pol = table.policy
-        q = np.empty(len(acts))
-        out = np.empty(4, dtype=np.int64)
-        args = self._args(table)
-        for k in range(len(acts)):
-            ns = self._nextset_of[ci[k, 0]]
-            key = (ns * self._key_args[0] + ci[k, 1]) * self._key_args[1] + ci[k, 3]
-            s, _, _ = _nearest(*args[:8], key, ns, ci[k, 2], self.f0, cf[k, 0], cf[k, 1], cf[k, 2],
-                               self._inv_sr2, self._inv_st2)
-            v = 0.0 if s < 0 else float(pol.V_opp_next[s] if swap[k] else pol.V_me_next[s])
-            q[k] = w_me[k] + pol.gamma * v
-        best = int(np.argmax(q))
-        return int(acts[best]), float(q[best])
+    def locate(self, obs: Observation) -> tuple[int, float, bool]:
+        """The graph state a live state maps to, as act() finds it: (state, normalised distance,
+        off_graph). No decision, no lookahead; state -1 only for an empty graph."""
+        s, d2, _, off = _locate_p(self._pi, self._pf, *self._ix, float(obs.r), float(obs.theta_self),
+                                  float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
+                                  int(obs.mask_other))
+        return int(s), float(np.sqrt(d2)), bool(off)
 
     def _roulette(self, table: _Table, s: int, m_self: int) -> int:
         from planner import roulette_probabilities
@@ -381,17 +782,23 @@ class NPCController:
         p = roulette_probabilities(q, self.temperature, "softmax", self._usage[idx], self.usage_penalty)
         return int(idx[self._rng.choice(len(idx), p=p)])
 
-    def act_batch(self, r, theta_self, theta_other, m_self, m_other, f_other, mask_other=None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Decisions for many NPCs at once (arrays of equal length; deterministic best edges).
-        Returns (actions, states, off_graph) arrays."""
+    def act_batch(self, r, theta_self, theta_other, m_self, m_other, f_other, mask_other=None,
+                  lookahead: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Decisions for many NPCs at once (arrays of equal length; deterministic best edges, in
+        parallel). Returns (actions, states, off_graph) arrays. ``lookahead=True`` (with
+        ``offgraph="lookahead"``) answers off-graph rows with the simulated lookahead, exactly as
+        act() does; the default answers them from the nearest state's table entry."""
         n = len(r)
         mask = np.zeros(n, dtype=np.int64) if mask_other is None else np.asarray(mask_other, dtype=np.int64)
         out = np.empty((n, 4), dtype=np.int64)
         dist = np.empty(n)
-        _act_batch(*self._args(self._table), np.asarray(r, dtype=np.float64), np.asarray(theta_self, dtype=np.float64),
-                   np.asarray(theta_other, dtype=np.float64), np.asarray(m_self, dtype=np.int64),
-                   np.asarray(m_other, dtype=np.int64), np.asarray(f_other, dtype=np.int64), mask, out, dist)
+        table = self._table
+        kernel = _act_batch if n >= PARALLEL_MIN else _act_batch_serial
+        kernel(self._T, self._pi, self._pf, *self._ix, self._legal, table.best_me, table.q_me, *table.la,
+                   bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
+                   np.asarray(theta_self, dtype=np.float64), np.asarray(theta_other, dtype=np.float64),
+                   np.asarray(m_self, dtype=np.int64), np.asarray(m_other, dtype=np.int64),
+                   np.asarray(f_other, dtype=np.int64), mask, out, dist)
         return out[:, 0], out[:, 1], out[:, 3].astype(bool)
 
     def close(self) -> None:

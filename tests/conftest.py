@@ -43,3 +43,37 @@ def boxing_files(mocap_root: Path) -> list[Path]:
             pytest.fail(msg)
         pytest.skip(msg)
     return files
+
+
+# ---- a small real Interaction Graph (controller, strategy swap, crowd, cooperative tests) ------
+#: Samples of the session's small graph: seconds to build, yet enough states for bouts to stay
+#: mostly near the graph. Tests that need a real graph share it (build once per session).
+SMALL_GRAPH_SAMPLES = 40_000
+
+
+@pytest.fixture(scope="session")
+def small_graph(boxing_library):
+    """(graph, library): an Interaction Graph of the CMU boxing library built with the default
+    options but only SMALL_GRAPH_SAMPLES samples (seed 0, one thread: deterministic). Uses the
+    session fixture ``boxing_library`` (defined below)."""
+    from igraph_fight.build import BuildOptions, build_graph
+    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=SMALL_GRAPH_SAMPLES), seed=0, workers=1)
+    return graph, boxing_library
+
+
+@pytest.fixture(scope="session")
+def boxing_library(boxing_files):
+    """The action library of the two CMU boxing takes (motion_graph.build_library, about 6 s)."""
+    from motion_graph.library import build_library
+    return build_library(boxing_files)
+
+
+@pytest.fixture(scope="session")
+def tiny_graph_file(boxing_library, tmp_path_factory) -> Path:
+    """A tiny Interaction Graph of the boxing library (3000 samples, a few seconds), saved with
+    its library embedded."""
+    from igraph_fight.build import BuildOptions, build_graph
+    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64), seed=0)
+    path = tmp_path_factory.mktemp("tiny_graph") / "tiny.igz"
+    graph.save(path)
+    return path

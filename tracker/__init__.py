@@ -6,6 +6,8 @@
     env = TrackingEnv(scene); obs = env.reset(ref)         # control at 30 Hz, physics 240 Hz
     obs, reward, done, info = env.step(PDController().act(env, obs))
     metrics = evaluate_walks(make_setup(LibraryWalks(lib)), PDController())
+    policy = load_default_policy()                         # the learned tracker (tracker/policy.py)
+    metrics = evaluate_walks(make_setup(LibraryWalks(lib)), policy)
 
 The fall definition lives in tracker.fall; measurements behind the design in tracker/MEASUREMENTS.md.
 """
@@ -20,6 +22,7 @@ _EXPORTS = {
     "model": ("C_MOCAP_TO_MJ", "EFFECTOR_LABELS", "TARGET_LABELS", "BodyMap", "FighterScene", "ModelOptions",
               "build_fighter_scene"),
     "pd": ("PDController",),
+    "policy": ("LearnedController", "load_default_policy", "load_policy"),
     "reference": ("FootPenetration", "Reference", "build_reference", "kinematic_error", "placement_transform"),
     "spec": ("FighterSpec", "FootCalibration", "fighter_spec"),
     "walks": ("ClipWindows", "LibraryWalks", "default_library", "walk_source"),
@@ -43,7 +46,7 @@ __all__ = [
     "EnvConfig", "StepInfo", "TrackingEnv", "EvalSetup", "WalkResult", "draw_walks", "evaluate_walks",
     "format_report", "make_setup", "run_walk", "PELVIS_DROP_M", "FallConfig", "detect_fall", "C_MOCAP_TO_MJ",
     "EFFECTOR_LABELS", "TARGET_LABELS", "BodyMap", "FighterScene", "ModelOptions", "build_fighter_scene",
-    "PDController", "FootPenetration", "Reference", "build_reference", "kinematic_error", "placement_transform",
+    "PDController", "LearnedController", "load_default_policy", "load_policy", "FootPenetration", "Reference", "build_reference", "kinematic_error", "placement_transform",
     "FighterSpec", "FootCalibration", "fighter_spec", "ClipWindows", "LibraryWalks", "default_library",
     "walk_source",
 ]

@@ -4,6 +4,9 @@ export the generated MuJoCo model.
     igraph-fight tracker eval [--controller pd|learned] [--ckpt CKPT] --walks 100 --actions 20 --seed 0 [--json]
     igraph-fight tracker render --out walk.png|walk.mp4 [--actions 6] [--seed 0] [--seconds 6]
     igraph-fight tracker model FILE.bvh --out fighter.xml [--fighters 2]
+    igraph-fight tracker train --library LIB --minutes M --out CKPT [--resume CKPT] [--device auto]
+
+``--controller learned`` without ``--ckpt`` loads the shipped policy (tracker/checkpoints/boxing_cmu13.pt).
 
 Walks come from ``--library LIB`` (a saved action library), else from the shared CMU boxing
 takes (built on the fly with motion_graph), or from raw clip windows with ``--clips FILE ...``.
@@ -27,7 +30,8 @@ def register(subparsers) -> None:
         q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
         q.add_argument("--controller", default="pd", help="pd (default) or learned")
-        q.add_argument("--ckpt", help="controller checkpoint (learned policy; for pd a JSON of gains)")
+        q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
+                                      "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
         q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")
         q.add_argument("--seed", type=int, default=0, help="random seed of the walks (default 0)")
         q.add_argument("--actions", type=int, default=20, help="actions per walk (default 20)")
@@ -52,12 +56,35 @@ def register(subparsers) -> None:
     r.add_argument("--backend", choices=("egl", "osmesa"), help="OpenGL backend (default: EGL, else OSMesa)")
     r.set_defaults(func=cmd_render)
 
+    t = sub.add_parser("train", help="train the learned tracking policy (PPO on action-graph walks, both cores)",
+                       description="Train or continue (--resume) the learned tracking policy; writes a resumable "
+                                   "checkpoint and a learning-curve PNG next to it.")
+    add_train_arguments(t)
+    t.set_defaults(func=cmd_train)
+
     m = sub.add_parser("model", help="write the generated MJCF of a skeleton (calibrated on the file's motion)")
     m.add_argument("file", help=".bvh or .amc file")
     m.add_argument("--out", required=True, help="output .xml")
     m.add_argument("--fighters", type=int, default=1, choices=(1, 2))
     m.add_argument("--physics-hz", type=float, default=240.0)
     m.set_defaults(func=cmd_model)
+
+
+def add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """Arguments of `tracker train` (here, not in tracker.train, so the CLI starts without torch)."""
+    p.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+    p.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
+    p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it")
+    p.add_argument("--resume", help="continue from this checkpoint (its config is kept)")
+    p.add_argument("--device", default="auto", help="auto (GPU when present, else CPU), cpu or cuda")
+    p.add_argument("--workers", type=int, default=2, help="environment processes (default 2: one per core)")
+    p.add_argument("--envs", type=int, default=16, help="environments per worker (default 16)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--push-prob", type=float, help="per-step chance of a push (default: the config's)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a TrainConfig field (repeatable), e.g. --set lr_actor=1e-4 --set push_prob=0.01")
+    p.add_argument("--slim", action="store_true", help="also write OUT-slim.pt: without the optimizer state (to ship)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _setup(args):
@@ -136,6 +163,11 @@ def cmd_render(args) -> int:
     print(f"wrote {out}: {len(frames)} frames of walk {walks[args.walk_index]} ({controller.name}: {fell}); "
           f"first simulation frame foreground {100 * st['foreground_share']:.0f}%")
     return 0
+
+
+def cmd_train(args) -> int:
+    from .train import main_args
+    return main_args(args)
 
 
 def cmd_model(args) -> int:

@@ -107,6 +107,9 @@ class TrackingEnv:
         self.t = 0
         self.sim_time = 0.0
         self.wall_time = 0.0
+        # Optional callable(data, substep) run after every physics substep (e.g. tracker.bout reads
+        # fist contacts of every substep, not only the last one); None: one mj_step(nstep) call.
+        self.substep_hook = None
         self._cache = [self._make_cache(k) for k in range(len(scene.fighters))]
         self.n_act = sum(c.n_act for c in self._cache)
 
@@ -230,7 +233,12 @@ class TrackingEnv:
             d.ctrl[c.act] = target
         if self._assist:
             self._move_root_targets(min(self.t + 1, self.t_end))   # where the step should end
-        mujoco.mj_step(self.model, d, nstep=self.substeps)
+        if self.substep_hook is None:
+            mujoco.mj_step(self.model, d, nstep=self.substeps)
+        else:
+            for s in range(self.substeps):
+                mujoco.mj_step(self.model, d)
+                self.substep_hook(d, s)
         # mj_step leaves position-dependent quantities one substep old: refresh body and site poses
         # (contacts stay one substep old, which the fall check tolerates).
         mujoco.mj_kinematics(self.model, d)

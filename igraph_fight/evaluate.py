@@ -1,0 +1,854 @@
+"""The match evaluation of the paper's Table 1 (DESIGN.md section 7), with the baselines.
+
+    igraph-fight evaluate --graph G.igz --opponents human,static,gametree2,gametree3,rl \\
+        --depths 1,3,5 --bouts 20 --seconds 60 --seed 0 --out out/eval --workers 2
+
+Rows are Interaction Graph fighters IG(d) = IGAgent(NPCController(graph, style, depth=d)),
+columns the opponents. Bout i of every (row, column) pair starts from the same random initial
+state (FightGame.new_initial_state with a generator seeded by (seed, i): common random
+numbers), and the agents get the same random stream; the IG fighter plays slot A in even bouts
+and slot B in odd ones (slot bias cancels). Score of a bout = hits landed by the IG fighter
+minus hits landed by the opponent. Cells report the mean over bouts with a 95% Student-t
+confidence interval.
+
+Also measured: coverage (every decision state of the gametree-3 fighter in the IG-vs-gametree3
+bouts is looked up on the graph: is there a state of its compatible group within the linking
+tolerance, InteractionGraph.locate), the decision cost of every agent (µs per decision, wall
+clock inside ``step``), the kind of every action chosen (histograms per agent), the IG
+fighters' off-graph rate (with the reason: no compatible group / out of tolerance), the RL
+baseline's budget, learning curve, head-to-head bouts (with its outboxer retrain) and the
+planner's style-swap time.
+
+Bouts run in ``workers`` processes (fork; each task is self-contained and seeded, so results
+do not depend on the worker count). Everything but timings is a function of the graph, the
+checkpoints and the seed: ``results_digest`` (sha256 of the deterministic part) is identical
+for identical inputs.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+PAPER = {  # Table 1 of Shum, Komura & Yamazaki 2008, rows IG(1), IG(3), IG(5) (DESIGN.md section 7)
+    "human": {1: -15, 3: 23, 5: 28},
+    "static": {1: 34, 3: 54, 5: 55},
+    "gametree2": {1: -37, 3: 14, 5: 28},
+    "gametree3": {1: -53, 3: -19, 5: -4},
+}
+PAPER_COVERAGE = 0.93
+OPPONENT_DOC = {
+    "human": "a scripted reactive PROXY for a person issuing high-level commands (0.25 s reaction delay, noisy "
+             "rules; agents/human.py), not a person",
+    "static": "trained by value iteration to approach and hit a target frozen in guard, no defence (after Lee & Lee "
+              "2004; agents/static.py)",
+    "gametree2": "min-max to depth 2 on the exact simulator, same reward as the IG fighter (agents/gametree.py)",
+    "gametree3": "the same to depth 3",
+    "rl": "masked PPO policy on continuous features, infighter reward (agents/rl.py, rl_train.py)",
+    "rl_outboxer": "the RL policy fine-tuned for the outboxer reward",
+    "random": "uniform legal actions",
+}
+OPPONENTS = ("human", "static", "gametree2", "gametree3", "rl", "random", "rl_outboxer")
+
+
+@dataclass
+class EvalConfig:
+    """What to evaluate (see the module docstring); paths as strings."""
+
+    graph: str
+    opponents: tuple = ("human", "static", "gametree2", "gametree3", "rl")
+    depths: tuple = (1, 3, 5)
+    bouts: int = 20
+    seconds: float = 60.0
+    seed: int = 0
+    workers: int = 1
+    style: str = "infighter"
+    rl_checkpoint: str | None = None            # default: igraph_fight/checkpoints/rl_infighter.pt
+    rl_outboxer_checkpoint: str | None = None   # default: igraph_fight/checkpoints/rl_outboxer.pt
+    train_rl: bool = False                      # retrain both RL policies before the bouts
+    rl_decisions: int = 1_000_000
+    rl_cpu_minutes: float = 15.0
+    rl_retrain_decisions: int = 300_000
+    head_to_head: tuple = ("random", "human", "static", "gametree2", "gametree3")
+    h2h_bouts: int | None = None                # default: bouts
+    regret_every: int = 8                       # every k-th IG decision: exact depth-3 regret (0: off)
+    regret_depth: int = 3
+    progress: bool = True
+    command: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+# ----- the per-process context -------------------------------------------------------------------
+_CTX: dict | None = None
+
+
+def _sim_params(graph):
+    from .sim import SimParams
+    opts = graph.header.get("options", {}).get("sim")
+    return SimParams(**opts) if opts else SimParams()
+
+
+def build_context(cfg: EvalConfig, rl: dict | None = None) -> dict:
+    """Graph, library, game, IG controllers (one per depth), static policy, RL checkpoints."""
+    from .agents.static import static_policy
+    from .controller import NPCController
+    from .game import FightGame, GameConfig
+    from .graph import load_graph
+
+    graph = load_graph(cfg.graph)
+    lib = graph.load_library()
+    controllers = {d: NPCController(graph, lib, style=cfg.style, depth=d) for d in cfg.depths}
+    tables = next(iter(controllers.values())).tables if controllers else None
+    game = FightGame(lib, GameConfig(max_seconds=cfg.seconds, sim=_sim_params(graph)), tables=tables)
+    from .agents.gametree import GameTreeSearch
+    ctx = {"cfg": cfg, "graph": graph, "lib": lib, "game": game, "controllers": controllers,
+           "static": static_policy(game.tables, cfg.style), "rl": rl or {},
+           "regret": GameTreeSearch(game.tables, cfg.style, cfg.regret_depth) if cfg.regret_every else None}
+    return ctx
+
+
+def _init_worker(cfg: EvalConfig, rl: dict | None) -> None:
+    global _CTX
+    import torch
+    torch.set_num_threads(1)
+    if _CTX is None or _CTX["cfg"] is not cfg:  # fork inherits the parent's context
+        _CTX = build_context(cfg, rl)
+
+
+def make_agent(ctx: dict, name: str):
+    """An agent by its table name: IG(d), human, static, gametree2/3, rl, rl_outboxer, random."""
+    from .agents import IGAgent, RandomAgent
+    from .agents.gametree import GameTreeAgent
+    from .agents.human import HumanProxyAgent
+    from .agents.rl import RLAgent
+    from .agents.static import StaticAgent
+
+    cfg = ctx["cfg"]
+    if name.startswith("IG("):
+        d = int(name[3:-1])
+        return IGAgent(ctx["controllers"][d], name=name)
+    if name == "human":
+        return HumanProxyAgent()
+    if name == "static":
+        return StaticAgent(cfg.style, policy=ctx["static"])
+    if name.startswith("gametree"):
+        return GameTreeAgent(int(name[len("gametree"):]), cfg.style)
+    if name == "random":
+        return RandomAgent()
+    if name in ("rl", "rl_outboxer"):
+        ck = ctx["rl"].get(name)
+        if ck is None:
+            raise ValueError(f"no RL checkpoint loaded for {name!r}")
+        return RLAgent(ck, name=name)
+    raise ValueError(f"unknown agent {name!r} (known: IG(d), {', '.join(OPPONENTS)})")
+
+
+class _Watch:
+    """Wraps an agent: times ``step``; with ``probe`` also looks every decision state up on the
+    graph before the agent acts (coverage for the gametree-3 fighter; for IG fighters, why a
+    decision is off the graph: no compatible group, or a group but out of tolerance)."""
+
+    def __init__(self, agent, graph=None, probe: bool = False, regret=None, regret_every: int = 0) -> None:
+        self.agent = agent
+        self.name = agent.name
+        self.graph = graph
+        self.coverage = probe
+        self.regret = regret            # a GameTreeSearch: exact depth-3 values of the agent's choices
+        self.regret_every = regret_every
+        self.regrets: list[tuple[float, int, int]] = []  # (regret, agrees with the search, off graph)
+        self.fidelity: list[tuple] = []  # per sampled on-graph decision, see _fidelity
+        self.us = 0.0
+        self.n = 0
+        self.cov_n = 0
+        self.cov_in = 0
+        self.cov_nogroup = 0
+
+    def reset(self, game, player, rng) -> None:
+        self.agent.reset(game, player, rng)
+
+    def step(self, state, player) -> int:
+        if self.coverage:
+            s, _, within = self.graph.locate(state.game.tables, state.world, player)
+            self.cov_n += 1
+            self.cov_in += int(within)
+            self.cov_nogroup += int(s < 0)
+        q = None
+        if self.regret is not None and self.regret_every and self.n % self.regret_every == 0:
+            from .state import to_sample
+            acts, q = self.regret.root_q(*to_sample(state.game.tables, state.world, player))
+            off0 = self.agent.off_graph
+            self._fidelity(state, player, int(acts[int(np.argmax(q))]), len(acts))
+        t = time.perf_counter()
+        a = self.agent.step(state, player)
+        self.us += (time.perf_counter() - t) * 1e6
+        self.n += 1
+        if q is not None:
+            qa = float(q[acts == a][0])
+            self.regrets.append((float(q.max()) - qa, int(qa >= q.max() - 1e-9), int(self.agent.off_graph > off0)))
+        return a
+
+
+    def _fidelity(self, state, player, best_action: int, n_menu: int) -> None:
+        """For an on-graph decision: the matched state's edges (stored features, as the planner sees
+        them) against the same actions simulated exactly from the live state. Records (mean
+        |W_stored - W_exact|, edges, stored hit & exact hit, stored hit & exact miss, stored miss &
+        exact hit, chosen edge predicted a hit, it really hits, distinct actions with an edge, menu
+        size, the exact search's best action has an edge)."""
+        from motion_graph.classify import KINDS
+        from planner import edge_rewards
+
+        from . import sim
+        from .controller import observe
+        from .edge_features import edge_features
+        from .state import to_sample
+        c = self.agent.controller
+        d = c.act(observe(state, player))
+        if d.off_graph or d.state < 0:
+            return
+        g = self.graph.arrays
+        lo, hi = int(g["state_offsets"][d.state]), int(g["state_offsets"][d.state + 1])
+        if hi <= lo:
+            return
+        acts = g["edge_action"][lo:hi].astype(np.int64)
+        stored = {k: np.asarray(g[k][lo:hi]) for k in g.keys() if k.startswith("feat_")}
+        w_st, _ = edge_rewards(stored, c._table.style_obj, list(KINDS))
+        si, sf = to_sample(state.game.tables, state.world, player)
+        _, _, ft, _ = sim.expand_samples(state.game.tables.kernel_tuple(), si[None], sf[None],
+                                         np.zeros(len(acts), dtype=np.int64), acts)
+        ex = edge_features(state.game.tables, np.full(len(acts), si[sim.SI_MOTHER]), acts, ft)
+        w_ex, _ = edge_rewards(ex, c._table.style_obj, list(KINDS))
+        hs = stored["feat_dmg_given"] > 0
+        he = ex["feat_dmg_given"] > 0
+        k = d.edge - lo if lo <= d.edge < hi else -1
+        self.fidelity.append((float(np.mean(np.abs(w_st - w_ex))), int(hi - lo), int(np.sum(hs & he)),
+                              int(np.sum(hs & ~he)), int(np.sum(~hs & he)),
+                              int(hs[k]) if k >= 0 else -1, int(he[k]) if k >= 0 else -1, len(set(acts.tolist())),
+                              n_menu, int(best_action in set(acts.tolist()))))
+
+
+def run_task(task: dict) -> dict:
+    """One bout: task = {id, row, col, i}. Returns the deterministic outcome and the timings."""
+    from .match import run_bout
+
+    ctx = _CTX
+    cfg: EvalConfig = ctx["cfg"]
+    game = ctx["game"]
+    i = int(task["i"])
+    is_ig = task["row"].startswith("IG(")
+    row = _Watch(make_agent(ctx, task["row"]), ctx["graph"], probe=is_ig, regret=ctx.get("regret") if is_ig else None,
+                 regret_every=cfg.regret_every)
+    col = _Watch(make_agent(ctx, task["col"]), ctx["graph"], probe=task["col"] == "gametree3" and task["row"].startswith("IG("))
+    initial = game.new_initial_state(np.random.default_rng([cfg.seed, i]))
+    slot = i % 2  # the row agent's slot
+    agents = [row, col] if slot == 0 else [col, row]
+    res = run_bout(game, agents, cfg.seconds, np.random.default_rng([cfg.seed, i, 1]), initial=initial)
+    hits_row, hits_col = float(res.hits[slot]), float(res.hits[1 - slot])
+    kinds = [{}, {}]
+    for d in res.decisions:
+        who = 0 if d["player"] == slot else 1
+        k = d["kind"]
+        kinds[who][k] = kinds[who].get(k, 0) + 1
+    out = {
+        "id": task["id"], "row": task["row"], "col": task["col"], "i": i, "slot": slot,
+        "score": hits_row - hits_col, "hits_row": hits_row, "hits_col": hits_col,
+        "decisions_row": row.n, "decisions_col": col.n, "kinds_row": kinds[0], "kinds_col": kinds[1],
+        "mean_distance_m": round(float(res.mean_distance_m), 6), "seconds": float(res.seconds),
+        "timing": {"us_row": row.us, "us_col": col.us, "wall_s": res.wall_s},
+    }
+    for who, w in (("row", row), ("col", col)):
+        if hasattr(w.agent, "events"):
+            out[f"events_{who}"] = int(w.agent.events)
+    if col.coverage:
+        out["coverage"] = {"n": col.cov_n, "within": col.cov_in, "no_group": col.cov_nogroup}
+    ag = row.agent
+    if hasattr(ag, "off_graph"):
+        out["ig"] = {"off_graph": int(ag.off_graph), "decisions": int(ag.decisions),
+                     "snap_m": float(np.sum(ag.snap_m)) if ag.snap_m else 0.0, "snaps": len(ag.snap_m),
+                     "snap_rad": float(np.sum(ag.snap_rad)) if ag.snap_rad else 0.0,
+                     "snap_frames": float(np.sum(np.abs(getattr(ag, "snap_frames", []) or [0]))),
+                     "probe_n": row.cov_n, "probe_within": row.cov_in, "probe_no_group": row.cov_nogroup,
+                     "regret": row.regrets, "fidelity": row.fidelity}
+    return out
+
+
+# ----- statistics ----------------------------------------------------------------------------------
+def mean_ci(x, level: float = 0.95) -> dict:
+    """Mean with a Student-t confidence interval (bouts are independent draws)."""
+    x = np.asarray(x, dtype=np.float64)
+    n = len(x)
+    m = float(x.mean()) if n else float("nan")
+    if n < 2:
+        return {"mean": m, "ci_low": m, "ci_high": m, "bouts": n, "sd": 0.0}
+    from scipy import stats
+    sd = float(x.std(ddof=1))
+    h = float(stats.t.ppf(0.5 + level / 2, n - 1)) * sd / math.sqrt(n)
+    return {"mean": m, "ci_low": m - h, "ci_high": m + h, "bouts": n, "sd": sd}
+
+
+# ----- RL checkpoints ----------------------------------------------------------------------------
+def _rl_checkpoints(cfg: EvalConfig, ctx: dict, out: Path, notes: list[str]) -> dict:
+    """Load (or train) the infighter RL policy and its outboxer retrain."""
+    from .agents.rl import default_checkpoint, load_checkpoint
+    from .graph import library_fingerprint
+    from .rl_train import RLConfig, train
+
+    if not ({"rl", "rl_outboxer"} & set(cfg.opponents) or cfg.head_to_head):
+        return {}
+    fp = library_fingerprint(ctx["lib"])
+    game = ctx["game"]
+    paths = {"rl": Path(cfg.rl_checkpoint) if cfg.rl_checkpoint else default_checkpoint("infighter"),
+             "rl_outboxer": Path(cfg.rl_outboxer_checkpoint) if cfg.rl_outboxer_checkpoint
+             else default_checkpoint("outboxer")}
+    cks: dict = {}
+    for name in ("rl", "rl_outboxer"):
+        p = paths[name]
+        ok = False
+        if not cfg.train_rl and p.is_file():
+            ck = load_checkpoint(p)
+            ok = ck.get("library_fingerprint") == fp and ck.get("n_actions") == game.tables.n_actions
+            if ok:
+                cks[name] = ck
+                cks[name + "_path"] = str(p)
+            else:
+                notes.append(f"{p} was trained on another action library: retrained here")
+        if not ok:
+            if not cfg.train_rl and not p.is_file():
+                notes.append(f"{p} missing: trained here")
+            dest = out / p.name
+            if name == "rl":
+                rc = RLConfig(style="infighter", total_decisions=cfg.rl_decisions, max_cpu_minutes=cfg.rl_cpu_minutes,
+                              seed=cfg.seed + 1)
+            else:
+                rc = RLConfig(style="outboxer", total_decisions=cfg.rl_retrain_decisions,
+                              max_cpu_minutes=cfg.rl_cpu_minutes, seed=cfg.seed + 2, init_from=cks["rl_path"])
+            cks[name] = train(game, rc, out=dest, progress=cfg.progress)
+            cks[name + "_path"] = str(dest)
+    return cks
+
+
+def _style_swap_ms(ctx: dict, repeat: int = 3) -> dict:
+    """Time from set_style('outboxer') to the new table being live on the deepest controller."""
+    from .controller import NPCController
+    d = max(ctx["cfg"].depths) if ctx["cfg"].depths else 5
+    c = NPCController(ctx["graph"], ctx["lib"], style=ctx["cfg"].style, depth=d)
+    times = []
+    try:
+        for k in range(repeat):
+            c.set_style("outboxer" if k % 2 == 0 else ctx["cfg"].style).result()
+            times.append(float(c.last_swap_ms))
+    finally:
+        c.close()
+    return {"median_ms": float(np.median(times)), "runs_ms": [round(t, 1) for t in times], "depth": d}
+
+
+# ----- the evaluation ------------------------------------------------------------------------------
+def tasks_for(cfg: EvalConfig, with_rl: bool = True) -> list[dict]:
+    """Every bout: the table's (row, column, i), then the RL policies' head-to-head bouts."""
+    rows = [f"IG({d})" for d in cfg.depths]
+    tasks = []
+    for r in rows:
+        for c in cfg.opponents:
+            for i in range(cfg.bouts):
+                tasks.append({"row": r, "col": c, "i": i, "kind": "table"})
+    if cfg.head_to_head and with_rl:
+        nb = cfg.h2h_bouts if cfg.h2h_bouts is not None else cfg.bouts
+        for r in ("rl", "rl_outboxer"):
+            for c in cfg.head_to_head:
+                for i in range(nb):
+                    tasks.append({"row": r, "col": c, "i": i, "kind": "h2h"})
+    for k, t in enumerate(tasks):
+        t["id"] = k
+    return tasks
+
+
+def evaluate(cfg: EvalConfig, out: str | Path) -> dict:
+    """Run the evaluation, write report.md, results.json and plots into ``out``; return the JSON."""
+    global _CTX
+    import torch
+    torch.set_num_threads(1)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    notes: list[str] = []
+    for o in list(cfg.opponents) + list(cfg.head_to_head):
+        if o not in OPPONENTS:
+            raise ValueError(f"unknown opponent {o!r} (known: {', '.join(OPPONENTS)})")
+    ctx = build_context(cfg)
+    t_setup = time.perf_counter() - t0
+    rl = _rl_checkpoints(cfg, ctx, out, notes)
+    ctx["rl"] = {k: v for k, v in rl.items() if not k.endswith("_path")}
+    t_rl = time.perf_counter() - t0 - t_setup
+    _CTX = ctx
+    tasks = tasks_for(cfg, with_rl="rl" in ctx["rl"] and "rl_outboxer" in ctx["rl"])
+    _warm_up(ctx, sorted({t["row"] for t in tasks} | {t["col"] for t in tasks}))
+    results: list[dict] = [None] * len(tasks)  # type: ignore[list-item]
+    bar = None
+    if cfg.progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(tasks), desc="bouts", unit="bout", file=sys.stderr)
+    t_b = time.perf_counter()
+    if cfg.workers <= 1:
+        for t in tasks:
+            results[t["id"]] = run_task(t)
+            if bar is not None:
+                bar.update(1)
+    else:
+        import multiprocessing as mp
+        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+        mpc = mp.get_context(method)
+        order = sorted(tasks, key=lambda t: -_cost_hint(t))  # long bouts first: better packing
+        with mpc.Pool(cfg.workers, initializer=_init_worker, initargs=(cfg, ctx["rl"])) as pool:
+            for r in pool.imap_unordered(run_task, order, chunksize=1):
+                results[r["id"]] = r
+                if bar is not None:
+                    bar.update(1)
+    if bar is not None:
+        bar.close()
+    t_bouts = time.perf_counter() - t_b
+    swap = _style_swap_ms(ctx) if cfg.depths else {}
+    report = _aggregate(cfg, ctx, rl, results, notes)
+    report["style_swap_ms"] = swap.get("median_ms")
+    report["timing"]["style_swap"] = swap
+    report["timing"].update({"setup_s": t_setup, "rl_s": t_rl, "bouts_s": t_bouts,
+                             "wall_s": time.perf_counter() - t0, "parent_cpu_s": time.process_time() - c0})
+    _plots(report, rl, out)
+    report["files"] = {"report": str(out / "report.md"), "json": str(out / "results.json"),
+                       "rl_curve": str(out / "rl_curve.png"), "kinds": str(out / "kinds.png")}
+    (out / "results.json").write_text(json.dumps(report, indent=1, default=_json_default))
+    (out / "report.md").write_text(markdown(report))
+    return report
+
+
+def _warm_up(ctx: dict, names) -> None:
+    """One decision of every agent on a throwaway state, so that compilation (numba, torch) is
+    neither in the decision times nor repeated in every worker (fork inherits it)."""
+    game = ctx["game"]
+    for n in names:
+        a = make_agent(ctx, n)
+        st = game.new_initial_state(np.random.default_rng(12345))
+        p = st.current_player()
+        a.reset(game, p, np.random.default_rng(0))
+        a.step(st, p)
+
+
+def _cost_hint(t: dict) -> float:
+    c = t["col"]
+    return 10.0 if c == "gametree3" else 3.0 if c == "gametree2" else 1.0
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _kind_hist(rows: list[dict], who: str) -> dict:
+    h: dict[str, int] = {}
+    for r in rows:
+        for k, v in r[f"kinds_{who}"].items():
+            h[k] = h.get(k, 0) + v
+    return dict(sorted(h.items()))
+
+
+def _aggregate(cfg: EvalConfig, ctx: dict, rl: dict, results: list[dict], notes: list[str]) -> dict:
+    graph = ctx["graph"]
+    rows = [f"IG({d})" for d in cfg.depths]
+    table: dict = {}
+    off: dict = {}
+    for r in rows:
+        table[r], off[r] = {}, {}
+        for c in cfg.opponents:
+            sub = [x for x in results if x["row"] == r and x["col"] == c]
+            cell = mean_ci([x["score"] for x in sub])
+            cell["hits_ig"] = float(np.mean([x["hits_row"] for x in sub]))
+            cell["hits_opponent"] = float(np.mean([x["hits_col"] for x in sub]))
+            cell["mean_distance_m"] = float(np.mean([x["mean_distance_m"] for x in sub]))
+            cell["paper"] = PAPER.get(c, {}).get(int(r[3:-1]))
+            table[r][c] = cell
+            n = sum(x["ig"]["decisions"] for x in sub)
+            off[r][c] = sum(x["ig"]["off_graph"] for x in sub) / max(n, 1)
+    h2h: dict = {}
+    for r in ("rl", "rl_outboxer"):
+        for c in cfg.head_to_head:
+            sub = [x for x in results if x["row"] == r and x["col"] == c]
+            if sub:
+                cell = mean_ci([x["score"] for x in sub])
+                cell["mean_distance_m"] = float(np.mean([x["mean_distance_m"] for x in sub]))
+                h2h.setdefault(r, {})[c] = cell
+    cov = [x["coverage"] for x in results if "coverage" in x]
+    cov_n = sum(c["n"] for c in cov)
+    coverage = sum(c["within"] for c in cov) / cov_n if cov_n else None
+    # decision cost and kinds per agent name
+    agents: dict[str, dict] = {}
+    for x in results:
+        for who, name in (("row", x["row"]), ("col", x["col"])):
+            a = agents.setdefault(name, {"us": 0.0, "n": 0, "kinds": {}})
+            a["us"] += x["timing"][f"us_{who}"]
+            a["n"] += x[f"decisions_{who}"]
+            for k, v in x[f"kinds_{who}"].items():
+                a["kinds"][k] = a["kinds"].get(k, 0) + v
+    decision_us = {k: (v["us"] / v["n"] if v["n"] else None) for k, v in sorted(agents.items())}
+    events = {}
+    for x in results:
+        for who, name in (("row", x["row"]), ("col", x["col"])):
+            if f"events_{who}" in x:
+                e = events.setdefault(name, [0, 0])
+                e[0] += x[f"events_{who}"]
+                e[1] += x[f"decisions_{who}"]
+    baselines = {"gametree_events_per_decision": {k: v[0] / max(v[1], 1) for k, v in sorted(events.items())},
+                 "static_training": {k: getattr(ctx["static"], k) for k in ("states", "events", "iterations", "gamma")}}
+    kinds = {k: dict(sorted(v["kinds"].items())) for k, v in sorted(agents.items())}
+    collapse = {}
+    for k, h in kinds.items():
+        tot = sum(h.values())
+        if tot:
+            p = np.array(list(h.values()), dtype=np.float64) / tot
+            collapse[k] = {"top_kind": max(h, key=h.get), "top_share": float(p.max()),
+                           "entropy_bits": float(-(p * np.log2(p)).sum()), "decisions": tot}
+    ig_diag = {}
+    for r in rows:
+        sub = [x for x in results if x["row"] == r]
+        snaps = sum(x["ig"]["snaps"] for x in sub)
+        pn = sum(x["ig"]["probe_n"] for x in sub)
+        rg = [t for x in sub for t in x["ig"]["regret"]]
+        def _rg(sel):
+            z = [t for t in rg if sel(t)]
+            return {"n": len(z), "mean_regret": float(np.mean([t[0] for t in z])) if z else None,
+                    "agreement": float(np.mean([t[1] for t in z])) if z else None}
+        ig_diag[r] = {"off_graph_rate": sum(x["ig"]["off_graph"] for x in sub) / max(sum(x["ig"]["decisions"] for x in sub), 1),
+                      "live_states_within_tolerance": sum(x["ig"]["probe_within"] for x in sub) / max(pn, 1),
+                      "live_states_without_compatible_group": sum(x["ig"]["probe_no_group"] for x in sub) / max(pn, 1),
+                      "off_graph_by_opponent": off[r],
+                      "snap_mean_cm": 100 * sum(x["ig"]["snap_m"] for x in sub) / max(snaps, 1),
+                      "snap_mean_deg": math.degrees(sum(x["ig"]["snap_rad"] for x in sub) / max(snaps, 1)),
+                      "snap_mean_frames_other": sum(x["ig"]["snap_frames"] for x in sub) / max(snaps, 1),
+                      "edge_fidelity": _fid([t for x in sub for t in x["ig"]["fidelity"]]),
+                      "regret_vs_exact_search": {"all": _rg(lambda t: True), "on_graph": _rg(lambda t: t[2] == 0),
+                                                 "off_graph": _rg(lambda t: t[2] == 1),
+                                                 "depth": cfg.regret_depth, "every": cfg.regret_every}}
+    rl_info = {}
+    if rl.get("rl") is not None:
+        b = rl["rl"]["budget"]
+        rb = rl.get("rl_outboxer", {}).get("budget", {}) if rl.get("rl_outboxer") is not None else {}
+        rl_info = {
+            "checkpoint": rl.get("rl_path"), "style": rl["rl"]["style"],
+            "train_minutes": b["cpu_minutes"], "train_wall_minutes": b["wall_minutes"], "decisions": b["decisions"],
+            "updates": b["updates"], "config": rl["rl"]["config"],
+            "retrain_minutes_new_style": rb.get("cpu_minutes"), "retrain_wall_minutes_new_style": rb.get("wall_minutes"),
+            "retrain_decisions_new_style": rb.get("decisions"), "retrain_checkpoint": rl.get("rl_outboxer_path"),
+            "retrain_from": "rl (infighter) weights, fine-tuned with the outboxer reward",
+            "head_to_head": h2h,
+            "curve_last": rl["rl"]["curve"][-1] if rl["rl"]["curve"] else None,
+        }
+    targets = _targets(cfg, table, coverage)
+    det = {"table": table, "coverage": coverage, "coverage_detail": {
+               "decisions": cov_n, "within": sum(c["within"] for c in cov),
+               "no_compatible_group": sum(c["no_group"] for c in cov)},
+           "kinds": kinds, "mode_collapse": collapse, "baselines": baselines, "ig_diagnostics": ig_diag, "head_to_head": h2h,
+           "targets": targets, "bouts_detail": [{k: v for k, v in x.items() if k != "timing"} for x in results]}
+    digest = hashlib.sha256(json.dumps(det, sort_keys=True, default=_json_default).encode()).hexdigest()
+    from .graph import package_version
+    return {
+        "config": {k: v for k, v in asdict(cfg).items() if k not in ("progress",)},
+        "graph": {"path": str(cfg.graph), "n_states": graph.n_states, "n_edges": graph.n_edges,
+                  "content_hash": graph.content_hash, "f0": graph.header.get("options", {}).get("f0"),
+                  "link_tol_r_m": graph.header.get("options", {}).get("link_tol_r_m"),
+                  "link_tol_theta_rad": graph.header.get("options", {}).get("link_tol_theta_rad")},
+        "ig_fighter": {"style": cfg.style, "agent": "IGAgent(NPCController(graph, style, depth=d)) with the defaults"},
+        "paper": {"table": {c: {f"IG({d})": v for d, v in PAPER[c].items()} for c in PAPER}, "coverage": PAPER_COVERAGE},
+        **{k: v for k, v in det.items() if k != "bouts_detail"},
+        "decision_us": decision_us,
+        "rl": rl_info,
+        "machine": machine_info(),
+        "package_version": package_version(),
+        "command": cfg.command,
+        "notes": notes,
+        "results_digest": digest,
+        "timing": {},
+        "bouts": det["bouts_detail"],
+    }
+
+
+def _fid(f: list) -> dict:
+    """Aggregate of _Watch._fidelity records."""
+    if not f:
+        return {"decisions": 0}
+    a = np.array(f, dtype=np.float64)
+    tp, fp, fn = a[:, 2].sum(), a[:, 3].sum(), a[:, 4].sum()
+    ch = a[a[:, 5] >= 0]
+    pred = ch[ch[:, 5] == 1]
+    return {"decisions": len(f), "edges": int(a[:, 1].sum()), "mean_abs_reward_error": float(a[:, 0].mean()),
+            "stored_hits_that_hit": float(tp / max(tp + fp, 1)), "exact_hits_stored": float(tp / max(tp + fn, 1)),
+            "chosen_edge_predicts_hit": int(len(pred)), "chosen_predicted_hits_that_hit": float(pred[:, 6].mean()) if len(pred) else None,
+            "menu_share_with_edge": float(np.mean(a[:, 7] / a[:, 8])), "exact_best_action_has_edge": float(a[:, 9].mean())}
+
+
+def _targets(cfg: EvalConfig, table: dict, coverage) -> dict:
+    rows = [f"IG({d})" for d in sorted(cfg.depths)]
+    t: dict = {}
+    if len(rows) >= 2:
+        t["strength_grows_with_depth"] = {
+            c: bool(all(table[a][c]["mean"] <= table[b][c]["mean"] for a, b in zip(rows, rows[1:]))
+                    and table[rows[0]][c]["mean"] < table[rows[-1]][c]["mean"]) for c in cfg.opponents}
+    top = rows[-1] if rows else None
+    if top == "IG(5)":
+        t["IG(5)_positive_ci_excludes_0"] = {c: bool(table[top][c]["ci_low"] > 0) for c in cfg.opponents
+                                             if c in ("human", "static", "gametree2", "rl")}
+        if "gametree3" in cfg.opponents:
+            t["IG(5)_vs_gametree3_at_least_0"] = bool(table[top]["gametree3"]["mean"] >= 0)
+    if coverage is not None:
+        t["coverage_at_least_93"] = bool(coverage >= 0.93)
+        t["coverage_goal_97"] = bool(coverage >= 0.97)
+    return t
+
+
+def machine_info() -> dict:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count()
+    vers = {}
+    for m in ("numpy", "numba", "torch", "scipy"):
+        try:
+            vers[m] = __import__(m).__version__
+        except Exception:  # noqa: BLE001
+            vers[m] = None
+    commit = None
+    try:
+        root = Path(__file__).resolve().parent.parent
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                text=True, timeout=5).stdout.strip() or None
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        if commit and dirty:
+            commit += "+dirty"
+    except Exception:  # noqa: BLE001
+        pass
+    return {"cpu": cpu, "cores": cores, "platform": platform.platform(), "python": platform.python_version(),
+            "versions": vers, "git": commit}
+
+
+# ----- artefacts -----------------------------------------------------------------------------------
+def _plots(report: dict, rl: dict, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4))
+    for name, lab in (("rl", "infighter"), ("rl_outboxer", "outboxer retrain")):
+        ck = rl.get(name)
+        if ck is None or not ck.get("curve"):
+            continue
+        cv = ck["curve"]
+        off = 0 if name == "rl" else rl["rl"]["budget"]["decisions"]
+        x = np.array([c["decisions"] for c in cv]) + off
+        ax[0].plot(x, [c["mean_reward"] for c in cv], label=f"{lab}: mean reward per decision")
+        opps = sorted({k[6:] for c in cv for k in c if k.startswith("score_")})
+        for o in opps:
+            y = np.array([c.get(f"score_{o}", np.nan) for c in cv], dtype=float)
+            k = max(1, len(y) // 25)
+            ys = np.convolve(np.nan_to_num(y), np.ones(k) / k, mode="same") if k > 1 else y
+            ax[1].plot(x, ys, label=f"{lab} vs {o}", ls="-" if name == "rl" else "--")
+    ax[0].set_xlabel("learner decisions")
+    ax[0].set_ylabel("Eq. 4 reward per decision")
+    ax[1].set_xlabel("learner decisions")
+    ax[1].set_ylabel("training bout score (hits - hits received), smoothed")
+    if ax[0].lines:
+        ax[0].legend(fontsize=7)
+        ax[1].legend(fontsize=6, ncol=2)
+    fig.suptitle("RL baseline learning curve (masked PPO)")
+    fig.tight_layout()
+    fig.savefig(out / "rl_curve.png", dpi=80)
+    plt.close(fig)
+    kinds = report["kinds"]
+    names = list(kinds)
+    allk = sorted({k for h in kinds.values() for k in h})
+    fig, ax = plt.subplots(figsize=(max(8, 0.9 * len(names)), 4))
+    bottom = np.zeros(len(names))
+    cmap = plt.get_cmap("tab20")
+    for j, k in enumerate(allk):
+        v = np.array([kinds[n].get(k, 0) / max(sum(kinds[n].values()), 1) for n in names])
+        ax.bar(names, v, bottom=bottom, label=k, color=cmap(j % 20))
+        bottom += v
+    ax.set_ylabel("share of decisions")
+    ax.set_title("action kinds chosen per agent")
+    ax.legend(fontsize=7, bbox_to_anchor=(1.01, 1), loc="upper left")
+    plt.setp(ax.get_xticklabels(), rotation=30, ha="right")
+    fig.tight_layout()
+    fig.savefig(out / "kinds.png", dpi=80)
+    plt.close(fig)
+
+
+def _f(x, nd: int = 1) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float) and not math.isfinite(x):
+        return "-"
+    return f"{x:+.{nd}f}" if isinstance(x, float) else str(x)
+
+
+def markdown(rep: dict) -> str:
+    """The Markdown report (deterministic sections first, timings last)."""
+    cfg = rep["config"]
+    L: list[str] = []
+    L.append("# Interaction Graph fighters vs baselines (Table 1 protocol)\n")
+    L.append(f"- command: `{rep['command'] or '(library call)'}`")
+    L.append(f"- package version {rep['package_version']}, git {rep['machine']['git']}")
+    m = rep["machine"]
+    L.append(f"- machine: {m['cpu']}, {m['cores']} cores available, {m['platform']}, Python {m['python']}, "
+             + ", ".join(f"{k} {v}" for k, v in m["versions"].items()))
+    g = rep["graph"]
+    L.append(f"- graph: `{g['path']}` ({g['n_states']} states, {g['n_edges']} edges, f0 {g['f0']}, link tolerance "
+             f"{g['link_tol_r_m']} m / {math.degrees(g['link_tol_theta_rad'] or 0):.0f} deg, content {g['content_hash'][:12]})")
+    L.append(f"- IG fighter: {rep['ig_fighter']['agent']}, style **{cfg['style']}** (also the game-tree reward)")
+    L.append(f"- {cfg['bouts']} bouts of {cfg['seconds']:.0f} s per cell, seed {cfg['seed']}; bout i of every cell starts "
+             "from the same random initial state; the IG fighter plays slot A in even bouts, B in odd ones")
+    L.append(f"- results digest (everything but timings): `{rep['results_digest'][:16]}`")
+    for n in rep["notes"]:
+        L.append(f"- note: {n}")
+    L.append("\n## Table 1: mean score per bout (IG hits - opponent hits), 95% CI; paper in brackets\n")
+    cols = list(next(iter(rep["table"].values())).keys()) if rep["table"] else []
+    L.append("| | " + " | ".join(cols) + " |")
+    L.append("|---|" + "---|" * len(cols))
+    for r, row in rep["table"].items():
+        cells = []
+        for c in cols:
+            x = row[c]
+            p = f" [{x['paper']:+d}]" if x.get("paper") is not None else ""
+            cells.append(f"{x['mean']:+.1f} ({x['ci_low']:+.1f}, {x['ci_high']:+.1f}){p}")
+        L.append(f"| {r} | " + " | ".join(cells) + " |")
+    L.append("\nOpponents: " + "; ".join(f"**{c}** {OPPONENT_DOC[c]}" for c in cols if c in OPPONENT_DOC) + ".")
+    L.append("\nHits per bout (IG / opponent) and mean distance (m):\n")
+    L.append("| | " + " | ".join(cols) + " |")
+    L.append("|---|" + "---|" * len(cols))
+    for r, row in rep["table"].items():
+        L.append(f"| {r} | " + " | ".join(f"{row[c]['hits_ig']:.1f} / {row[c]['hits_opponent']:.1f}, "
+                                          f"{row[c]['mean_distance_m']:.2f}" for c in cols) + " |")
+    L.append("\n## Targets\n")
+    for k, v in rep["targets"].items():
+        if isinstance(v, dict):
+            L.append(f"- {k}: " + ", ".join(f"{c} {'yes' if ok else '**no**'}" for c, ok in v.items()))
+        else:
+            L.append(f"- {k}: {'yes' if v else '**no**'}")
+    L.append("\n## Coverage\n")
+    cd = rep["coverage_detail"]
+    if rep["coverage"] is not None:
+        L.append(f"{100 * rep['coverage']:.1f}% of the {cd['decisions']} decision states of the gametree-3 fighter lie within "
+                 f"the linking tolerance of an IG state of their compatible group (paper: 93%); "
+                 f"{cd['no_compatible_group']} had no compatible group at all.")
+    L.append("\n## IG fighter diagnostics (off-graph decisions, runtime snapping)\n")
+    L.append("Off-graph rate: decisions the controller flagged off the graph (overall and per opponent); "
+             "'no group': live states whose compatible group (Next-set, M_other, open strikes, F_other within f0) "
+             "holds no IG state at all; snapping: mean correction per snapped decision.\n")
+    L.append("| | off-graph | " + " | ".join(f"vs {c}" for c in cols) + " | no group | snap cm | snap deg | other's frame shift |")
+    L.append("|---|---|" + "---|" * len(cols) + "---|---|---|---|")
+    for r, d in rep["ig_diagnostics"].items():
+        L.append(f"| {r} | {100 * d['off_graph_rate']:.0f}% | " + " | ".join(
+            f"{100 * d['off_graph_by_opponent'][c]:.0f}%" for c in cols) +
+            f" | {100 * d['live_states_without_compatible_group']:.0f}% | {d['snap_mean_cm']:.1f} | "
+            f"{d['snap_mean_deg']:.1f} | {d['snap_mean_frames_other']:.1f} |")
+    L.append("\nDecision quality: on a sample of IG decisions (every "
+             f"{cfg.get('regret_every')}th), the exact depth-{cfg.get('regret_depth')} min-max over the simulator (the "
+             "gametree reward) values every legal action; regret = best value - value of the IG's action (Eq. 4 reward "
+             "units), agreement = the IG picked a best action.\n")
+    L.append("| | sampled | agreement | mean regret | on graph: n, agreement, regret | off graph: n, agreement, regret |")
+    L.append("|---|---|---|---|---|---|")
+    for r, d in rep["ig_diagnostics"].items():
+        g = d.get("regret_vs_exact_search")
+        if not g:
+            continue
+
+        def cell(z):
+            if not z["n"]:
+                return "0"
+            return f"{z['n']}, {100 * z['agreement']:.0f}%, {z['mean_regret']:.2f}"
+        a = g["all"]
+        L.append(f"| {r} | {a['n']} | {100 * (a['agreement'] or 0):.0f}% | {a['mean_regret'] or 0:.2f} | "
+                 f"{cell(g['on_graph'])} | {cell(g['off_graph'])} |")
+    L.append("\nEdge fidelity: on the same sampled decisions when on the graph, every edge of the matched state "
+             "(its stored features, what the planner optimises) against the same action simulated exactly from the "
+             "live state.\n")
+    L.append("| | decisions | edges | mean abs reward error | stored hits that hit | exact hits the graph knew | "
+             "chosen edges predicting a hit: n, share that hit | menu actions with an edge | exact best action has an edge |")
+    L.append("|---|---|---|---|---|---|---|---|---|")
+    for r, d in rep["ig_diagnostics"].items():
+        f = d.get("edge_fidelity") or {}
+        if not f.get("decisions"):
+            continue
+        ph = f["chosen_predicted_hits_that_hit"]
+        L.append(f"| {r} | {f['decisions']} | {f['edges']} | {f['mean_abs_reward_error']:.2f} | "
+                 f"{100 * f['stored_hits_that_hit']:.0f}% | {100 * f['exact_hits_stored']:.0f}% | "
+                 f"{f['chosen_edge_predicts_hit']}, {'-' if ph is None else f'{100 * ph:.0f}%'} | "
+                 f"{100 * f['menu_share_with_edge']:.0f}% | {100 * f['exact_best_action_has_edge']:.0f}% |")
+    L.append("\n## Decision cost (µs per decision, wall clock inside step; varies with the machine)\n")
+    L.append("| agent | µs |\n|---|---|")
+    for k, v in rep["decision_us"].items():
+        L.append(f"| {k} | {v:.0f} |" if v is not None else f"| {k} | - |")
+    b = rep.get("baselines", {})
+    if b.get("gametree_events_per_decision"):
+        L.append("\nGame tree: " + ", ".join(f"{k} simulates {v:.0f} events per decision (alpha-beta, exact)"
+                                            for k, v in b["gametree_events_per_decision"].items()) + ".")
+    if b.get("static_training"):
+        st = b["static_training"]
+        L.append(f"Static: value iteration over {st['states']} grid states, {st['events']} simulated events, "
+                 f"{st['iterations']} sweeps (gamma {st['gamma']}), trained at start-up (seconds).")
+    rl = rep.get("rl") or {}
+    if rl:
+        L.append("\n## RL baseline (masked PPO)\n")
+        L.append(f"- checkpoint `{rl['checkpoint']}` ({rl['style']} reward): {rl['train_minutes']:.1f} CPU minutes "
+                 f"({rl['train_wall_minutes']:.1f} wall), {rl['decisions']} learner decisions, {rl['updates']} updates; "
+                 "training command: `igraph-fight train-rl --graph G --style infighter --out igraph_fight/checkpoints/rl_infighter.pt`")
+        if rl.get("retrain_minutes_new_style") is not None:
+            L.append(f"- new style (outboxer): {rl['retrain_minutes_new_style']:.1f} CPU minutes, "
+                     f"{rl['retrain_decisions_new_style']} decisions ({rl['retrain_from']}) vs the planner's style swap "
+                     f"{rep['style_swap_ms']:.0f} ms (NPCController.set_style at depth {rep['timing']['style_swap'].get('depth')})"
+                     if rep.get("style_swap_ms") is not None else "")
+        L.append("- learning curve: `rl_curve.png`")
+        if rl.get("head_to_head"):
+            h = rl["head_to_head"]
+            hc = sorted({c for v in h.values() for c in v}, key=lambda c: OPPONENTS.index(c))
+            L.append("\nHead-to-head (RL score: its hits - opponent hits; mean, 95% CI; mean distance m):\n")
+            L.append("| | " + " | ".join(hc) + " |")
+            L.append("|---|" + "---|" * len(hc))
+            for r, row in h.items():
+                L.append(f"| {r} | " + " | ".join(
+                    f"{row[c]['mean']:+.1f} ({row[c]['ci_low']:+.1f}, {row[c]['ci_high']:+.1f}), {row[c]['mean_distance_m']:.2f} m"
+                    if c in row else "-" for c in hc) + " |")
+    L.append("\n## Action kinds per agent (share of decisions; `kinds.png`)\n")
+    allk = sorted({k for h in rep["kinds"].values() for k in h})
+    L.append("| agent | " + " | ".join(allk) + " | top share | entropy (bits) |")
+    L.append("|---|" + "---|" * len(allk) + "---|---|")
+    for n, h in rep["kinds"].items():
+        tot = max(sum(h.values()), 1)
+        mc = rep["mode_collapse"].get(n, {})
+        L.append(f"| {n} | " + " | ".join(f"{100 * h.get(k, 0) / tot:.0f}%" for k in allk) +
+                 f" | {100 * mc.get('top_share', 0):.0f}% | {mc.get('entropy_bits', 0):.2f} |")
+    t = rep["timing"]
+    L.append("\n## Timings (vary from run to run)\n")
+    L.append(f"- wall time {t.get('wall_s', 0) / 60:.1f} min: setup {t.get('setup_s', 0):.0f} s, RL {t.get('rl_s', 0):.0f} s, "
+             f"bouts {t.get('bouts_s', 0):.0f} s with {cfg['workers']} workers")
+    if t.get("style_swap"):
+        L.append(f"- style swap: {t['style_swap']}")
+    return "\n".join(L) + "\n"

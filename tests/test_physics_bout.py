@@ -1,0 +1,191 @@
+"""Physics bouts (tracker.bout): hits counted from fist contacts in a scripted scene, a short bout
+that is deterministic for a seed and writes its artifacts, and the coupled state read from physics
+agreeing with the kinematic simulator when the bodies follow their references."""
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.realdata
+
+
+@pytest.fixture(scope="module")
+def setup(boxing_library):
+    from tracker.bout import BoutSetup
+    return BoutSetup.create(boxing_library)
+
+
+def _strike_action(lib):
+    """A straight punch whose first strike is thrown with a fist, and that strike's side."""
+    parts = lib.parts
+    for a in range(lib.n_actions):
+        if lib.labels[a] in ("straight", "jab") and lib.is_attack(a):
+            k = int(lib.strike_offsets[a])
+            j = int(lib.strike_joint[k])
+            if j in (parts["r_fist"], parts["r_wrist"], parts["l_fist"], parts["l_wrist"]):
+                return a, k, ("r_fist" if j in (parts["r_fist"], parts["r_wrist"]) else "l_fist")
+    pytest.skip("no fist strike in the library")
+
+
+def _facing_start(setup, a_first: int, distance: float = 1.2):
+    """Fighter A at the origin facing B (heading 0 faces +Z), B facing A, both at the last frame of a
+    guard action from which A's punch is legal."""
+    lib = setup.library
+    guards = [g for g in range(lib.n_actions) if a_first in set(int(x) for x in lib.next(g))]
+    if not guards:
+        pytest.skip("no action leads to the punch")
+    g = guards[0]
+    return setup.game.initial_state((0.0, 0.0), (0.0, distance), (0.0, np.pi), (g, int(setup.game.start_actions[0])))
+
+
+def _scripted_punch(setup, overlap_m: float, arrive: str = "window"):
+    """Drive A's punching fist kinematically (A's whole body teleported along a line, every control
+    step, with the matching velocity) towards B's head until the fist sphere overlaps the head
+    sphere by ``overlap_m`` (negative: stops that far short). B is simulated (PD). Returns the bout."""
+    import mujoco
+
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.pd import PDController
+    lib = setup.library
+    a, k, fist = _strike_action(lib)
+    calm = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    bout = PhysicsBout(setup, [MenuAgent([a], "puncher"), MenuAgent(calm, "target")], PDController(),
+                       BoutConfig(seconds=2.0))
+    bout.start(seed=0, initial=_facing_start(setup, a))
+    assert bout.decisions[0]["action"] == a
+    m, d = bout.model, bout.env.data
+    fA = bout.scene.fighters[0]
+    g_fist = int(fA.geom_label[fist][0])
+    g_head = int(bout.scene.fighters[1].geom_label["head"][0])
+    w0, w1 = int(lib.strike_w0[k]), int(lib.strike_w1[k])
+    # in the window: a steady approach arriving mid-window; late: stand off until the (widened)
+    # window is over, then close in over 5 steps
+    t_go = 0 if arrive == "window" else w1 + bout.config.window_slack[1] + 1
+    t_arrive = (w0 + w1) // 2 if arrive == "window" else t_go + 5
+    r_sum = float(m.geom_size[g_head, 0] + m.geom_size[g_fist, 0])
+    state = {}
+
+    def drive(b):
+        """Move A rigidly so the fist-to-head surface gap shrinks linearly to -overlap at t_arrive
+        (following B's head as B moves), with the matching root velocity."""
+        t = b.env.t
+        mujoco.mj_kinematics(m, d)
+        v = d.geom_xpos[g_head] - d.geom_xpos[g_fist]
+        dist = float(np.linalg.norm(v))
+        gap = dist - r_sum
+        state.setdefault("g0", gap)
+        g0 = state["g0"]
+        want = g0 + (-overlap_m - g0) * float(np.clip((t + 1 - t_go) / (t_arrive - t_go), 0.0, 1.0))
+        u = v / dist
+        q = d.qpos[fA.qpos_slice].copy()
+        q[:3] += u * (gap - want) * 0.5           # half now, the velocity covers the rest of the step
+        d.qpos[fA.qpos_slice] = q
+        d.qvel[fA.qvel_slice] = 0.0
+        d.qvel[fA.qvel_adr:fA.qvel_adr + 3] = u * (gap - want) * 0.5 * 30.0
+        mujoco.mj_forward(m, d)
+
+    for _ in range(t_arrive + 8):
+        bout.step(before_physics=drive)
+    return bout, bout.finish()
+
+
+def test_scripted_fist_into_head_counts_one_hit(setup):
+    bout, res = _scripted_punch(setup, overlap_m=0.03)
+    hits = [h for h in res.hit_events if h["attacker"] == 0]
+    assert len(hits) == 1, res.hit_events            # contact lasts several steps: debounced to one hit
+    h = hits[0]
+    assert h["target"] == "head" and h["victim"] == 1
+    assert h["force_n"] >= bout.config.hit_force_n
+    assert res.hits[1] == 0
+
+
+def test_scripted_fist_stopping_short_counts_nothing(setup):
+    _, res = _scripted_punch(setup, overlap_m=-0.05)
+    assert res.hits.sum() == 0 and not res.touch_events
+
+
+def test_fist_contact_outside_a_strike_window_is_a_touch_not_a_hit(setup):
+    _, res = _scripted_punch(setup, overlap_m=0.03, arrive="late")
+    assert res.hits[0] == 0
+    assert any(t["attacker"] == 0 and t["target"] == "head" for t in res.touch_events)
+
+
+def _bout_args(graph, out, seed=3, seconds=3.0):
+    return argparse.Namespace(graph=str(graph), library=None, a="infighter", b="outboxer", depth_a=2, depth_b=2,
+                              swap_a=None, seconds=seconds, seed=seed, out=str(out), json=True, physics=True,
+                              tracker="pd", video=False, video_fps=15.0)
+
+
+def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_file, tmp_path, capsys):
+    from tracker.bout import cmd_physics_fight
+    runs = []
+    for i in range(2):
+        assert cmd_physics_fight(_bout_args(tiny_graph_file, tmp_path / f"run{i}")) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    s0, s1 = runs
+    for key in ("falls_a", "falls_b", "planned_hits", "realised_hits", "score", "realtime_factor", "artifacts"):
+        assert key in s0
+    assert s0["realtime_factor"] > 0
+    volatile = {"wall_s", "realtime_factor", "artifacts", "machine_load"}
+    assert {k: v for k, v in s0.items() if k not in volatile} == {k: v for k, v in s1.items() if k not in volatile}
+    log0 = (tmp_path / "run0" / "log.jsonl").read_text()
+    assert log0 == (tmp_path / "run1" / "log.jsonl").read_text()
+    lines = [json.loads(l) for l in log0.splitlines()]
+    assert {"action", "distance"} <= {l["type"] for l in lines}
+    assert s0["decisions_a"] >= 2 and s0["decisions_b"] >= 2
+    for name in ("log", "summary", "plot", "plot_physics"):
+        assert (tmp_path / "run0").joinpath(s0["artifacts"][name].split("/")[-1]).is_file()
+
+
+def test_bout_video_renders(setup, tmp_path):
+    """The MP4 of a short bout (offscreen MuJoCo: EGL, else OSMesa)."""
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout, render_bout_video
+    from tracker.pd import PDController
+    bout = PhysicsBout(setup, [MenuAgent(name="a"), MenuAgent(name="b")], PDController(), BoutConfig(seconds=1.0))
+    res = bout.run(seed=1)
+    try:
+        p = render_bout_video(bout, res, tmp_path / "bout.mp4", fps=10.0, width=160, height=120)
+    except RuntimeError as e:
+        pytest.skip(f"no offscreen rendering here: {e}")
+    assert p.stat().st_size > 1000
+
+
+def test_coupled_state_from_physics_matches_the_kinematic_simulator(setup):
+    """With the pelvises held on their references (root assist: a diagnostic, not physics), the
+    coupled state the agents see equals the kinematic game's for the same actions."""
+    from igraph_fight.controller import observe
+
+    from tracker.bout import BoutConfig, BoutSetup, MenuAgent, PhysicsBout
+    from tracker.pd import PDController
+    lib = setup.library
+    assisted = BoutSetup(lib, *_assisted_parts(setup))
+    seen = []
+
+    class Rec(MenuAgent):
+        def decide(self, ctx):
+            a = super().decide(ctx)
+            seen.append((ctx.k, ctx.obs))
+            return a
+
+    bout = PhysicsBout(assisted, [Rec(name="a"), Rec(name="b")], PDController(), BoutConfig(seconds=3.0))
+    res = bout.run(seed=5)
+    st = setup.game.new_initial_state(np.random.default_rng(5))
+    assert len(res.decisions) >= 4
+    for d, (k, ob) in zip(res.decisions[:6], seen):
+        assert st.current_player() == d["player"] == k
+        kin = observe(st, k)
+        assert (kin.m_self, kin.m_other, kin.f_other) == (ob.m_self, ob.m_other, ob.f_other)
+        assert abs(kin.r - ob.r) < 0.05
+        assert abs(np.angle(np.exp(1j * (kin.theta_self - ob.theta_self)))) < 0.15
+        assert abs(np.angle(np.exp(1j * (kin.theta_other - ob.theta_other)))) < 0.15
+        st.apply_action(d["action"])
+
+
+def _assisted_parts(setup):
+    """(scene, env, lift, tables, game, root_assist) of a root-assisted copy of ``setup``."""
+    from tracker.bout import BoutSetup
+    a = BoutSetup.create(setup.library, root_assist=True)
+    return a.scene, a.env, a.lift_m, a.tables, a.game, True

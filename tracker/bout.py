@@ -1,0 +1,1484 @@
+"""Physics bouts: two humanoids in one MuJoCo ring, each driven by an action-choosing agent (an
+Interaction Graph NPCController, the physics RL baseline, a script) and executed by the tracking
+controller (the learned policy, or PD).
+
+    setup = BoutSetup.create(library)                       # fighter model, 2-fighter scene, env
+    bout = PhysicsBout(setup, [IGAgent(npc_a), IGAgent(npc_b)], load_policy(ckpt))
+    res = bout.run(seed=1)                                  # PhysicsBoutResult
+    write_physics_artifacts(bout, res, "out/fight")         # log.jsonl, summary.json, plots, MP4
+
+Rules (what ``run`` does; every number is a BoutConfig field):
+
+* Start: the kinematic game's random start (igraph_fight.game.FightGame.new_initial_state with the
+  bout seed: distance 1-3 m, random headings, both at the last frame of a guard action), posed in
+  physics. Control at 30 Hz (the library rate), physics at 240 Hz.
+* Online references: each fighter's Reference is a buffer over the bout's control steps. When a
+  fighter's action ends (``lead`` = 4 control steps before its last frame, because the tracking
+  policy observes the reference up to 4 steps ahead) its agent chooses the next action from the
+  coupled state *predicted at the action's end*: each fighter's physical pelvis ground position and
+  fighting direction now, moved on by its reference's displacement over the remaining steps. The
+  fighting direction is the reference's (placement heading + the library path heading at the
+  frame) corrected by the yaw difference between the physical and the reference pelvis. The next
+  action's reference is placed at that predicted pose (ActionLibrary.sequence_motion, blended over
+  ``blend_frames`` from the previous action's end pose), so the reference is re-anchored on the
+  body at every action: root drift never accumulates across actions.
+* Coupled state for the agent (igraph_fight.controller.Observation): r, theta_self, theta_other
+  from the predicted poses, M_self the finishing action, M_other / F_other the opponent's action
+  and frame at that instant, mask_other the opponent's strikes already resolved (planned or hit)
+  whose window is still open. When both fighters finish together, the one that did not choose
+  last chooses first and the other sees its new action at frame 0 (as in FightState).
+* Planned hits: at every decision instant the kinematic simulator (igraph_fight.state.advance,
+  frame by frame) runs from that coupled state to the next decision instant; the strikes it judges
+  hits are logged as planned (attacker, action instance, strike).
+* Realised hits: after every physics substep (TrackingEnv.substep_hook) the contacts of a fist
+  geom with the opponent's head, chest or belly geom are read with their normal force. A hit is
+  such a contact with force >= ``hit_force_n`` (1 N) inside a strike window of the attacker's
+  current action (the window [w0, w1) widened by ``window_slack`` frames: the physical fist lags
+  the reference), by the strike's own fist; one hit per strike window (debounced). Fist contacts
+  outside a strike window are logged as touches, not hits. Forces are clipped at
+  ``force_clip_n`` (200 N) for the damage sum (the competitive-sports paper's r_match).
+  A planned hit is realised when the same strike of the same action instance lands physically.
+* Falls (tracker.fall.detect_fall, the one definition: a non-foot geom on the floor, or the pelvis
+  35 cm below the reference pelvis): the fall is counted, the fighter lies for ``fall_pause_s``
+  (its PD holds its last reference pose; no hits by or on it count), then it is reset to a
+  standing guard pose (the first frame of a guard action, chosen with the bout's generator, with
+  the reference's velocities) at the pelvis ground position and fighting direction it had when
+  the fall was detected (not where the body came to rest: a toppled body lies up to a metre
+  away), at least ``reset_min_distance_m`` from the opponent, and plays that guard action before
+  choosing again. The library has no get-up motion, so a reset is the rule.
+* Score = realised hits of A - realised hits of B (the kinematic bouts' score).
+* Per control step and fighter the competitive-sports paper's reward terms are accumulated
+  (match: clipped fist force given - received; close: exp(-3 d^2), d the closest distance of the
+  fighter's fists to the opponent's head/chest/belly; facing: exp(-5 |v.f - 1|); energy: kappa
+  * sum of squared joint angular accelerations, kappa = 1 - exp(-50 max(0, l - 1)^2); fall); the
+  physics RL baseline (tracker.physics_rl) learns from them, the bout reports their sums.
+* Real-time factor: simulated seconds / wall seconds of the whole bout loop (decisions,
+  references, tracking policy, physics, hit judging), rendering excluded.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, NamedTuple, Protocol
+
+import mujoco
+import numpy as np
+
+from .env import EnvConfig, TrackingEnv, _heading, _wrap
+from .model import EFFECTOR_LABELS, TARGET_LABELS, FighterScene, ModelOptions, build_fighter_scene
+from .reference import FootPenetration, Reference, build_reference
+
+# ----------------------------------------------------------------------------------------------
+# configuration and agents
+
+
+@dataclass(frozen=True)
+class BoutConfig:
+    """Rules of a physics bout (see the module doc). Times in seconds, distances in metres,
+    forces in newtons, frames at the control rate (= the library rate, 30 Hz).
+
+    Attributes:
+        seconds: bout length.
+        hit_force_n: a fist contact on a target counts from this normal force.
+        force_clip_n: forces are clipped here for the damage sum / match reward.
+        window_slack: (before, after) frames added to a strike window for the physical hit.
+        fall_pause_s: how long a fallen fighter lies before it is reset.
+        reset_min_distance_m: a reset fighter is put at least this far (pelvis ground distance)
+            from the opponent.
+        blend_frames: pose blend from the previous action's end (ActionLibrary.sequence_motion).
+        init_distance_m: initial distance range (the kinematic game's).
+        physics_hz: physics rate.
+        w_close, w_facing, w_energy, w_penalty: the competitive-sports paper's reward weights.
+        record_qpos: keep qpos per control step (needed for the video).
+    """
+
+    seconds: float = 60.0
+    hit_force_n: float = 1.0
+    force_clip_n: float = 200.0
+    window_slack: tuple[int, int] = (1, 4)
+    fall_pause_s: float = 1.0
+    reset_min_distance_m: float = 0.6
+    blend_frames: int = 4
+    init_distance_m: tuple[float, float] = (1.0, 3.0)
+    physics_hz: float = 240.0
+    w_close: float = 0.2
+    w_facing: float = 0.05
+    w_energy: float = 0.001
+    w_penalty: float = 30.0
+    record_qpos: bool = True
+
+
+class DecisionContext(NamedTuple):
+    """What an agent sees when it must choose (fighter ``k``, at bout time ``t_s`` s).
+
+    obs: the coupled state as igraph_fight.controller.Observation (predicted at the action's end).
+    menu: the legal actions Next(M_self) (library ids). world: the predicted coupled WorldState.
+    features: physical features of the decider and the opponent (PhysicsBout.features).
+    reward: the paper's reward terms accumulated for this fighter since its previous decision.
+    steps: control steps since its previous decision.
+    """
+
+    k: int
+    t_s: float
+    obs: object
+    menu: np.ndarray
+    world: object
+    features: np.ndarray
+    reward: dict
+    steps: int
+
+
+class Agent(Protocol):
+    """An action chooser. Optional: ``finish(k, reward, steps)``, called at the bout's end with the
+    reward terms accumulated since the agent's last decision (learning agents)."""
+
+    name: str
+
+    def reset(self, bout: "PhysicsBout", k: int, rng: np.random.Generator) -> None: ...
+
+    def decide(self, ctx: DecisionContext) -> int: ...
+
+
+class IGAgent:
+    """An Interaction Graph fighter: the NPCController's answer for the live coupled state."""
+
+    def __init__(self, controller, name: str | None = None) -> None:
+        self.controller = controller
+        self.name = name or f"{controller.style}({controller.depth})"
+        self.decisions = 0
+        self.off_graph = 0
+
+    def reset(self, bout, k, rng) -> None:
+        self.decisions = 0
+        self.off_graph = 0
+
+    def decide(self, ctx: DecisionContext) -> int:
+        d = self.controller.act(ctx.obs)
+        self.decisions += 1
+        self.off_graph += int(d.off_graph)
+        return int(d.action)
+
+
+class MenuAgent:
+    """Scripted: a fixed preference list (first legal one wins), else a random legal action."""
+
+    def __init__(self, prefer: list[int] | None = None, name: str = "scripted") -> None:
+        self.prefer = list(prefer or [])
+        self.name = name
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, bout, k, rng) -> None:
+        self.rng = np.random.default_rng(rng.integers(1 << 31))
+
+    def decide(self, ctx: DecisionContext) -> int:
+        menu = set(int(a) for a in ctx.menu)
+        for a in self.prefer:
+            if a in menu:
+                return a
+        return int(self.rng.choice(ctx.menu))
+
+
+# ----------------------------------------------------------------------------------------------
+# set-up shared by bouts (model, scene, environment)
+
+
+@dataclass
+class BoutSetup:
+    """The fighter model calibrated on the library, the two-fighter scene and its environment;
+    built once and reused by every bout (RL workers run hundreds of bouts on one setup)."""
+
+    library: object
+    scene: FighterScene
+    env: TrackingEnv
+    lift_m: float
+    tables: object          # igraph_fight.sim.SimTables (the kinematic simulator of planned hits)
+    game: object            # igraph_fight.game.FightGame (initial states, guard actions)
+    root_assist: bool = False
+
+    @classmethod
+    def create(cls, library, physics_hz: float = 240.0, sim_params=None, root_assist: bool = False) -> "BoutSetup":
+        """root_assist: hold each pelvis on its reference with a weld (ModelOptions.root_assist):
+        NOT physics (a fighter cannot fall), a labelled diagnostic only."""
+        from igraph_fight.game import FightGame, GameConfig
+        from igraph_fight.sim import SimParams, SimTables
+
+        from .spec import fighter_spec
+        from .walks import LibraryWalks
+        src = LibraryWalks(library)
+        if abs(src.fps - 30.0) > 1e-6:
+            raise ValueError(f"physics bouts need a 30 fps library (control rate), got {src.fps}")
+        spec = fighter_spec(src.skeleton, src.calibration_motions())
+        scene = build_fighter_scene(spec, 2, ModelOptions(physics_hz=physics_hz, root_assist=root_assist))
+        env = TrackingEnv(scene, EnvConfig(terminate_on_fall=False))
+        # One constant lift for every action (per-action "auto" lifts would make the reference
+        # jump vertically at transitions): the lift "auto" finds on the whole library.
+        lift = build_reference(src.calibration_motions()[0], scene, 0, lift="auto").penetration.lift_m
+        sp = sim_params if sim_params is not None else SimParams()
+        tables = SimTables.from_library(library, sp)
+        game = FightGame(library, GameConfig(sim=sp), tables=tables)
+        return cls(library, scene, env, float(lift), tables, game, root_assist)
+
+    def __post_init__(self) -> None:
+        self._refs: dict[int, dict] = {}
+        fm = self.scene.fighters[0]
+        if fm.joint_type != "ball":
+            raise ValueError("physics bouts need ball joints (ModelOptions(joint_type='ball'))")
+        base = fm.qpos_adr
+        self.quat_cols = np.concatenate([np.arange(3, 7)] + [np.arange(a - base, a - base + 4) for a in fm.joint_qpos])
+
+    def action_reference(self, a: int) -> dict:
+        """Reference of action ``a`` alone at the origin placement (frame 0 pelvis on the ground
+        origin, fighting direction 0), lifted by ``lift_m``; cached. Placement-invariant parts
+        (joints, PD targets, balance features in the facing frame) are reused as they are."""
+        c = self._refs.get(a)
+        if c is None:
+            from .policy import _ref_balance
+            mo = self.library.sequence_motion([int(a)], 0)
+            ref = build_reference(mo, self.scene, 0, lift=self.lift_m)
+            try:
+                bal = _ref_balance(self.env, 0, ref)
+            except Exception:  # noqa: BLE001 - torch missing: PD bouts do not need them
+                bal = np.zeros((ref.n_frames, 12))
+            c = {"qpos": ref.qpos, "qvel": ref.qvel, "ctrl": ref.ctrl, "ctrl_vel": ref.ctrl_vel, "sites": ref.sites,
+                 "balance": bal, "yaw": _yaws(ref.qpos[:, 3:7], self.env._cache[0].lateral)}
+            self._refs[a] = c
+        return c
+
+    def sites_of(self, qpos: np.ndarray) -> np.ndarray:
+        """Joint-site world positions (N, S, 3) of qpos rows of one fighter."""
+        fm = self.scene.fighters[0]
+        if not hasattr(self, "_scratch"):
+            self._scratch = mujoco.MjData(self.scene.model)
+        d = self._scratch
+        out = np.zeros((len(qpos), len(fm.site_ids), 3))
+        for i, q in enumerate(qpos):
+            d.qpos[fm.qpos_slice] = q
+            mujoco.mj_kinematics(self.scene.model, d)
+            out[i] = d.site_xpos[fm.site_ids]
+        return out
+
+    def ctrl_of(self, qpos: np.ndarray) -> np.ndarray:
+        """PD position targets (N, n_act) of qpos rows (one fighter): rotation vectors of the joints."""
+        fm = self.scene.fighters[0]
+        base = fm.qpos_adr
+        q = np.stack([qpos[:, a - base:a - base + 4] for a in fm.joint_qpos], axis=1)   # (N, D, 4)
+        w = np.clip(q[..., 0], -1.0, 1.0)
+        v = q[..., 1:]
+        sn = np.linalg.norm(v, axis=-1)
+        ang = 2.0 * np.arctan2(sn, w)
+        ang = np.where(ang > np.pi, ang - 2.0 * np.pi, ang)
+        scale = np.where(sn > 1e-12, ang / np.maximum(sn, 1e-12), 2.0)
+        rv = v * scale[..., None]
+        return rv[:, fm.act_joint, fm.act_axis]
+
+
+# ----------------------------------------------------------------------------------------------
+# per-fighter bookkeeping
+
+
+@dataclass
+class _Segment:
+    t0: int            # control step of the action's frame 0
+    action: int
+    inst: int          # action instance id (per fighter)
+    hold: bool = False  # a fallen fighter's placeholder: frame 0 held
+
+
+class _Fighter:
+    def __init__(self, k: int, T: int, fm, setup: BoutSetup) -> None:
+        self.k = k
+        nq, nv, na, ns = fm.nq, fm.nv, fm.n_act, len(fm.site_ids)
+        pen = FootPenetration.from_depths(np.zeros(1))
+        self.ref = Reference(30.0, np.zeros((T, nq)), np.zeros((T, nv)), np.zeros((T, na)), np.zeros((T, na)),
+                             np.zeros((T, ns, 3)), pen, "physics bout", {f"_balance_f{k}": np.zeros((T, 12))})
+        self.ref.qpos[:, 3] = 1.0
+        self.fight_heading = np.zeros(T)   # reference fighting direction per step (mocap heading, rad)
+        self.ref_yaw = np.zeros(T)         # reference pelvis hip-line yaw (MuJoCo, rad)
+        self.segments: list[_Segment] = []
+        self.t_dec_end = 0                 # last frame of the last planned action
+        self.n_inst = 0
+        self.down = False
+        self.reset_at = -1
+        self.resolved: dict[int, int] = {}   # instance -> strike bits resolved (planned or realised)
+        self.realised: dict[int, int] = {}   # instance -> strike bits that landed physically
+        self.touching = False
+        self.reward = _zero_reward()
+        self.steps_since = 0
+        self.reward_total = _zero_reward()
+
+    def segment_at(self, t: int) -> _Segment | None:
+        for s in reversed(self.segments):
+            if s.t0 <= t:
+                return s
+        return None
+
+    def action_frame(self, t: int, nf: np.ndarray) -> tuple[int, int, int]:
+        """(action, frame, instance) at control step t (frames clamped to the action's last)."""
+        s = self.segment_at(t)
+        if s is None:
+            return -1, 0, -1
+        f = 0 if s.hold else min(t - s.t0, int(nf[s.action]) - 1)
+        return s.action, f, s.inst
+
+
+def _zero_reward() -> dict:
+    return {"match": 0.0, "close": 0.0, "facing": 0.0, "energy": 0.0, "fall": 0.0, "given_n": 0.0,
+            "received_n": 0.0}
+
+
+# ----------------------------------------------------------------------------------------------
+# results
+
+
+@dataclass
+class PhysicsBoutResult:
+    """Everything a physics bout produced (times s, distances m, forces N)."""
+
+    names: tuple[str, str]
+    seconds: float
+    seed: int
+    hits: np.ndarray                  # realised hits by A, by B
+    planned: np.ndarray               # planned hits by A, by B
+    planned_realised: np.ndarray      # planned hits that landed, by A, by B
+    planned_standing: np.ndarray      # planned hits due while both fighters stood
+    planned_standing_realised: np.ndarray
+    falls: np.ndarray
+    damage_n: np.ndarray              # clipped fist force given (sum over control steps), by A, by B
+    touches: np.ndarray
+    decisions: list[dict]
+    hit_events: list[dict]
+    planned_events: list[dict]
+    fall_events: list[dict]
+    touch_events: list[dict]
+    notes: list[dict]
+    trace: dict
+    reward: list[dict]
+    wall_s: float
+    sim_s: float
+    tracker: str
+    agents_info: list[dict] = field(default_factory=list)
+
+    @property
+    def score(self) -> float:
+        return float(self.hits[0] - self.hits[1])
+
+    @property
+    def realtime_factor(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else float("nan")
+
+    def summary(self) -> dict:
+        minutes = max(self.seconds / 60.0, 1e-9)
+        p = float(self.planned.sum())
+        ps = float(self.planned_standing.sum())
+        dist = self.trace["distance"]
+        down = np.asarray(self.trace["down"], dtype=bool).reshape(-1, 2)
+        kinds = [{}, {}]
+        for d in self.decisions:
+            kinds[d["player"]][d["kind"]] = kinds[d["player"]].get(d["kind"], 0) + 1
+        share = [{k: v / max(sum(c.values()), 1) for k, v in sorted(c.items())} for c in kinds]
+        return {
+            "a": self.names[0], "b": self.names[1], "seconds": self.seconds, "seed": self.seed, "physics": True,
+            "hits_a": float(self.hits[0]), "hits_b": float(self.hits[1]), "score": self.score,
+            "defended_a": 0.0, "defended_b": 0.0,
+            "mean_distance_m": float(np.mean(dist)) if len(dist) else float("nan"),
+            "decisions_a": sum(1 for d in self.decisions if d["player"] == 0),
+            "decisions_b": sum(1 for d in self.decisions if d["player"] == 1),
+            "kind_share_a": share[0], "kind_share_b": share[1],
+            "falls_a": int(self.falls[0]), "falls_b": int(self.falls[1]),
+            "falls_per_min_a": float(self.falls[0]) / minutes, "falls_per_min_b": float(self.falls[1]) / minutes,
+            "fall_reasons": {r: sum(1 for e in self.fall_events if e["reason"] == r)
+                             for r in sorted({e["reason"] for e in self.fall_events})},
+            "standing_s_a": float((~down[:, 0]).sum()) / 30.0 if len(down) else 0.0,
+            "standing_s_b": float((~down[:, 1]).sum()) / 30.0 if len(down) else 0.0,
+            "planned_hits": p, "planned_hits_a": float(self.planned[0]), "planned_hits_b": float(self.planned[1]),
+            "realised_hits": float(self.hits.sum()),
+            "planned_realised": float(self.planned_realised.sum()),
+            "planned_realised_ratio": float(self.planned_realised.sum()) / p if p else None,
+            "planned_hits_standing": ps,
+            "planned_realised_ratio_standing": float(self.planned_standing_realised.sum()) / ps if ps else None,
+            "unplanned_hits": float(self.hits.sum() - self.planned_realised.sum()),
+            "touches_a": int(self.touches[0]), "touches_b": int(self.touches[1]),
+            "damage_n_a": float(self.damage_n[0]), "damage_n_b": float(self.damage_n[1]),
+            "reward_a": self.reward[0], "reward_b": self.reward[1],
+            "realtime_factor": self.realtime_factor, "wall_s": self.wall_s, "sim_s": self.sim_s,
+            "tracker": self.tracker, "agents": self.agents_info,
+            **{f"off_graph_{'ab'[k]}": (a["off_graph"] / max(a["decisions"], 1)) for k, a in enumerate(self.agents_info)
+               if "off_graph" in a},
+        }
+
+
+# ----------------------------------------------------------------------------------------------
+# the bout
+
+
+class PhysicsBout:
+    """One physics bout runner (see the module doc). Reusable: ``run`` resets everything."""
+
+    def __init__(self, setup: BoutSetup, agents: list, tracker, config: BoutConfig = BoutConfig()) -> None:
+        if abs(config.physics_hz - setup.scene.options.physics_hz) > 1e-9:
+            raise ValueError("BoutConfig.physics_hz differs from the setup's scene")
+        self.setup = setup
+        self.lib = setup.library
+        self.tables = setup.tables
+        self.env = setup.env
+        self.scene = setup.scene
+        self.model = setup.scene.model
+        self.agents = list(agents)
+        self.tracker = tracker
+        self.config = config
+        self.lead = int(max(self.env.config.obs_future))
+        self.nf = np.asarray(self.tables.n_frames, dtype=np.int64)
+        self.fms = setup.scene.fighters
+        self._geom_tables()
+        self._trace_tables = None
+        self.schedule: list[tuple[float, Callable[[], None], str]] = []
+        self.hook_gap_m = 0.5
+
+    # ------------------------------------------------------------------ static tables
+    def _geom_tables(self) -> None:
+        m = self.model
+        self.fist_owner = np.full(m.ngeom, -1, dtype=np.int64)
+        self.fist_side = np.full(m.ngeom, -1, dtype=np.int64)
+        self.target_owner = np.full(m.ngeom, -1, dtype=np.int64)
+        self.target_kind = np.full(m.ngeom, -1, dtype=np.int64)
+        self.fist_geoms, self.target_geoms = [], []
+        for f in self.fms:
+            fg, tg = [], []
+            for side, lab in enumerate(EFFECTOR_LABELS):
+                for g in f.geom_label.get(lab, []):
+                    self.fist_owner[g] = f.index
+                    self.fist_side[g] = side
+                    fg.append(int(g))
+            for j, lab in enumerate(TARGET_LABELS):
+                for g in f.geom_label.get(lab, []):
+                    self.target_owner[g] = f.index
+                    self.target_kind[g] = j
+                    tg.append(int(g))
+            self.fist_geoms.append(np.array(fg, dtype=np.int64))
+            self.target_geoms.append(np.array(tg, dtype=np.int64))
+        self._fist_geo = [(g, m.geom_size[g, 0].copy()) for g in self.fist_geoms]
+        cap = mujoco.mjtGeom.mjGEOM_CAPSULE
+        self._target_geo = [(g, m.geom_size[g, 0].copy(), np.where(m.geom_type[g] == cap, m.geom_size[g, 1], 0.0))
+                            for g in self.target_geoms]
+        # strike effector joint -> fist side (0 left, 1 right, -1 other)
+        parts = self.lib.parts
+        side_of = {parts.get("l_fist", -9): 0, parts.get("l_wrist", -9): 0, parts.get("r_fist", -9): 1,
+                   parts.get("r_wrist", -9): 1}
+        self.strike_side = np.array([side_of.get(int(j), -1) for j in self.lib.strike_joint], dtype=np.int64)
+
+    # ------------------------------------------------------------------ run
+    def run(self, seed: int = 0, initial=None, progress: bool = False) -> PhysicsBoutResult:
+        """Play one bout (deterministic for a seed on one machine): ``start``, ``step`` until the
+        bout's length, ``finish``. ``initial``: a igraph_fight.game.FightState to start from
+        instead of the seed's random start."""
+        self.start(seed, initial)
+        it = range(self.n_steps)
+        if progress:
+            from tqdm import tqdm
+            it = tqdm(it, desc="physics bout", unit="step", mininterval=2.0)
+        t_wall = time.perf_counter()
+        try:
+            for _ in it:
+                self.step()
+        finally:
+            self.env.substep_hook = None
+        return self.finish(time.perf_counter() - t_wall)
+
+    def start(self, seed: int = 0, initial=None) -> None:
+        """Reset everything, draw the initial state, take the first decisions, pose both fighters."""
+        from igraph_fight.state import WorldState
+        cfg = self.config
+        rng = np.random.default_rng(seed)
+        env = self.env
+        self.seed = seed
+        self.n_steps = int(round(cfg.seconds * env.config.control_hz))
+        T = self.n_steps + 2 * int(self.nf.max()) + int(cfg.fall_pause_s * 30) + 4 * self.lead + 8
+        self.F = [_Fighter(k, T, self.fms[k], self.setup) for k in range(2)]
+        self.T = T
+        self.rng = rng
+        self.decisions: list[dict] = []
+        self.hit_events: list[dict] = []
+        self.planned_events: list[dict] = []
+        self.fall_events: list[dict] = []
+        self.touch_events: list[dict] = []
+        self.notes: list[dict] = []
+        self.last_decider = -1
+        self.damage = np.zeros(2)
+        self._step_force = np.zeros(2)       # max over substeps of the clipped force given (this step)
+        self._sub_hits: list[tuple] = []     # (attacker, side, defender, target kind, force) this step
+        self._prev_v = [None, None]
+        self._gap = 0.0
+        self._pending = sorted(self.schedule, key=lambda x: x[0])
+        # initial coupled state: the kinematic game's random start (both at a guard's last frame)
+        st = initial if initial is not None else self.setup.game.new_initial_state(rng)
+        w0: WorldState = st.world
+        for k in range(2):
+            f = self.F[k]
+            f.segments.append(_Segment(-int(self.nf[w0.action[k]]) + 1, int(w0.action[k]), -1))
+            f.t_dec_end = 0
+            f.start_pose = (float(w0.x[k]), float(w0.z[k]), float(w0.heading[k]))
+        for k, ag in enumerate(self.agents):
+            ag.reset(self, k, rng)
+        # first decisions at t = 0 (no physics yet: the poses are the initial world's)
+        self._decide_due(0, initial_world=w0)
+        self._obs = env.reset([self.F[0].ref, self.F[1].ref], 0)
+        self.tracker.reset(env)
+        if self.setup.root_assist:
+            env.set_root_assist(True)
+        self._trace = {"t": [], "pose": [], "action": [], "frame": [], "distance": [], "qpos": [], "down": []}
+        self._record(self._trace)
+
+    def step(self, before_physics: Callable[["PhysicsBout"], None] | None = None) -> None:
+        """One control step: scheduled callbacks, tracking controller, physics (contacts judged),
+        falls and resets, decisions. ``before_physics(bout)`` runs right before the physics (a test
+        may drive a body kinematically there)."""
+        env = self.env
+        while self._pending and self._pending[0][0] <= env.t / 30.0:
+            _, cb, note = self._pending.pop(0)
+            cb()
+            self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
+        act = self.tracker.act(env, self._obs)
+        for f in self.F:
+            if f.down:
+                sl = self.fms[f.k].ctrl_slice
+                act = np.array(act, dtype=np.float64, copy=True)
+                k_ref = min(env.t + env.config.target_lead, env.t_end)
+                act[sl] = (0.0 if env.config.residual_actions else f.ref.ctrl[k_ref])
+        self._sub_hits.clear()
+        self._step_force[:] = 0.0
+        if before_physics is not None:
+            before_physics(self)
+            self._gap = 0.0
+        # contacts are read every substep only when a fist is near a target (a fist moves less
+        # than ``hook_gap_m`` in one control step)
+        env.substep_hook = self._substep if self._gap < self.hook_gap_m else None
+        obs, _, _, info = env.step(act)
+        t = env.t
+        self._after_step(t, info)
+        changed = self._falls_and_resets(t, info)
+        changed |= self._decide_due(t)
+        self._obs = env._obs_all() if changed else obs
+        self._record(self._trace)
+
+    def finish(self, wall_s: float = float("nan")) -> PhysicsBoutResult:
+        """The result of the bout so far; learning agents receive their last action's reward."""
+        self.env.substep_hook = None
+        for k, ag in enumerate(self.agents):
+            if hasattr(ag, "finish"):
+                ag.finish(k, dict(self.F[k].reward), self.F[k].steps_since)
+        self.sim_s = self.env.t / self.env.config.control_hz
+        return self._result(self.seed, self._trace, wall_s)
+
+    # ------------------------------------------------------------------ physical state
+    def pelvis_xy(self, k: int) -> np.ndarray:
+        a = self.fms[k].qpos_adr
+        return self.env.data.qpos[a:a + 2].copy()
+
+    def physical_yaw(self, k: int) -> float:
+        c = self.env._cache[k]
+        return _heading(self.env.data.xmat[c.pelvis].reshape(3, 3), c.lateral)
+
+    def fighting_heading(self, k: int, t: int) -> float:
+        """Physical fighting direction now (mocap heading convention, rad)."""
+        f = self.F[k]
+        return float(_wrap(f.fight_heading[t] + _wrap(self.physical_yaw(k) - f.ref_yaw[t])))
+
+    def predicted_pose(self, k: int, t_now: int, t_e: int) -> tuple[float, float, float]:
+        """(x, z, heading) in the library's ground frame (mocap axes) predicted at step t_e: the
+        physical pose now moved by the reference's displacement from t_now to t_e."""
+        f = self.F[k]
+        te = min(t_e, self.T - 1)
+        xy = self.pelvis_xy(k) + (f.ref.qpos[te, :2] - f.ref.qpos[t_now, :2])
+        h = _wrap(f.fight_heading[te] + _wrap(self.physical_yaw(k) - f.ref_yaw[t_now]))
+        return float(xy[0]), float(-xy[1]), float(h)
+
+    def world_at(self, t_e: int, t_now: int, initial_world=None):
+        """Coupled WorldState predicted at step t_e (igraph_fight.state.WorldState)."""
+        from igraph_fight.state import WorldState
+        xs, zs, hs, acts, frs, res = [], [], [], [], [], []
+        for k in range(2):
+            f = self.F[k]
+            if initial_world is not None:
+                x, z, h = f.start_pose
+            else:
+                x, z, h = self.predicted_pose(k, t_now, t_e)
+            a, fr, inst = f.action_frame(t_e, self.nf)
+            xs.append(x), zs.append(z), hs.append(h), acts.append(a), frs.append(fr)
+            res.append(f.resolved.get(inst, 0))
+        return WorldState(np.array(xs), np.array(zs), np.array(hs), np.array(acts, dtype=np.int64),
+                          np.array(frs, dtype=np.int64), np.array(res, dtype=np.int64))
+
+    def features(self, k: int) -> np.ndarray:
+        """Physical features of fighter k for a learning agent (own and opponent's body):
+        pelvis height, up-vector tilt (2), pelvis velocity in k's facing frame (2) for each fighter,
+        closest fist-to-target distances both ways, down flags."""
+        d = self.env.data
+        out = []
+        yaw = self.physical_yaw(k)
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        for j in (k, 1 - k):
+            c = self.env._cache[j]
+            R = d.xmat[c.pelvis].reshape(3, 3)
+            v = d.qvel[c.qvel.start:c.qvel.start + 2]
+            out += [d.xpos[c.pelvis, 2], R[2, 0], R[2, 1], cy * v[0] + sy * v[1], -sy * v[0] + cy * v[1],
+                    float(self.F[j].down)]
+        out += [self._fist_target_distance(k, 1 - k), self._fist_target_distance(1 - k, k)]
+        return np.array(out, dtype=np.float64)
+
+    def _fist_target_distance(self, a: int, b: int) -> float:
+        """Closest distance (m, >= 0) between a's fist spheres and b's head/chest/belly geoms
+        (spheres, or capsules as segments with a radius)."""
+        d = self.env.data
+        fg, fr = self._fist_geo[a]
+        tg, tr, thl = self._target_geo[b]
+        p = d.geom_xpos[fg]                                   # (F, 3)
+        c = d.geom_xpos[tg]                                   # (G, 3)
+        ax = d.geom_xmat[tg][:, [2, 5, 8]]                    # capsule axis (local z) in world
+        rel = p[:, None, :] - c[None, :, :]                   # (F, G, 3)
+        s = np.clip((rel * ax[None]).sum(-1), -thl[None], thl[None])
+        q = rel - s[..., None] * ax[None]
+        dist = np.sqrt((q * q).sum(-1)) - fr[:, None] - tr[None, :]
+        return max(float(dist.min()), 0.0)
+
+    # ------------------------------------------------------------------ references
+    def _write_segment(self, k: int, t0: int, action: int, prev: int | None, pose: tuple[float, float, float],
+                       inst: int) -> None:
+        """Place ``action`` with its frame 0 at ``pose`` (x, z, heading; mocap ground frame) and
+        write its reference into fighter k's buffer from step t0, the first ``blend_frames`` frames'
+        joint rotations blended from ``prev``'s end pose as ActionLibrary.sequence_motion does."""
+        lib = self.lib
+        X, Z, H = pose
+        c = self.setup.action_reference(action)
+        n = c["qpos"].shape[0]
+        f = self.F[k]
+        n_w = min(n, self.T - t0)
+        if n_w <= 0:
+            return
+        Rz, qz = _yaw_rot(H), _yaw_quat(H)
+        tr = np.array([X, -Z, 0.0])
+        qpos = c["qpos"][:n_w].copy()
+        qpos[:, :3] = qpos[:, :3] @ Rz.T + tr
+        qpos[:, 3:7] = _quat_mul(qz, qpos[:, 3:7])
+        qvel = c["qvel"][:n_w].copy()
+        qvel[:, :3] = qvel[:, :3] @ Rz.T
+        ctrl = c["ctrl"][:n_w].copy()
+        nb = min(self.config.blend_frames, n_w - 1)
+        if prev is not None and prev >= 0 and nb > 0:
+            pc = self.setup.action_reference(int(prev))
+            end = pc["qpos"][-1].copy()
+            end[3:7] = _quat_mul(_yaw_quat(H - float(lib.dheading[prev])), end[3:7])
+            quat_cols = self.setup.quat_cols
+            w = 1.0 - (np.arange(nb) + 1) / (nb + 1)
+            w[0] = 1.0
+            for i in range(nb):
+                qpos[i, quat_cols] = _slerp(qpos[i, quat_cols].reshape(-1, 4), end[quat_cols].reshape(-1, 4),
+                                            float(w[i])).ravel()
+            ctrl[:nb] = self.setup.ctrl_of(qpos[:nb])
+        sl = slice(t0, t0 + n_w)
+        sites = c["sites"][:n_w] @ Rz.T + tr
+        yaw = c["yaw"][:n_w] + H
+        if prev is not None and prev >= 0 and nb > 0:
+            sites[:nb] = self.setup.sites_of(qpos[:nb])
+            yaw[:nb] = _yaws(qpos[:nb, 3:7], self.env._cache[0].lateral)
+        f.ref.qpos[sl] = qpos
+        f.ref.qvel[sl] = qvel
+        f.ref.ctrl[sl] = ctrl
+        f.ref.ctrl_vel[sl] = c["ctrl_vel"][:n_w]
+        f.ref.sites[sl] = sites
+        g0 = int(lib.frame_offsets[action])
+        f.fight_heading[sl] = H + lib.path[g0:g0 + n_w, 2]
+        f.ref_yaw[sl] = yaw
+        f.ref.meta[f"_balance_f{k}"][sl] = c["balance"][:n_w]
+        self._hold_after(k, t0 + n_w - 1)
+
+    def _hold_after(self, k: int, t_last: int) -> None:
+        """Fill the buffer after step t_last with that frame held still (a placeholder, so the
+        tracker's look-ahead never reads an unwritten frame)."""
+        f = self.F[k]
+        sl = slice(t_last + 1, self.T)
+        if sl.start >= self.T:
+            return
+        f.ref.qpos[sl] = f.ref.qpos[t_last]
+        f.ref.qvel[sl] = 0.0
+        f.ref.ctrl[sl] = f.ref.ctrl[t_last]
+        f.ref.ctrl_vel[sl] = 0.0
+        f.ref.sites[sl] = f.ref.sites[t_last]
+        f.fight_heading[sl] = f.fight_heading[t_last]
+        f.ref_yaw[sl] = f.ref_yaw[t_last]
+        bal = f.ref.meta[f"_balance_f{k}"]
+        bal[sl] = bal[t_last]
+        bal[sl, 3:6] = 0.0
+
+    # ------------------------------------------------------------------ decisions
+    def _decide_due(self, t: int, initial_world=None) -> bool:
+        """Ask every fighter whose action ends within ``lead`` steps for its next action; then
+        predict the planned hits of each new decision instant. Returns True if a reference changed."""
+        from igraph_fight.state import to_sample
+        from igraph_fight import sim as ksim
+        from igraph_fight.controller import Observation
+        due = [k for k in range(2) if not self.F[k].down and t >= self.F[k].t_dec_end - self.lead
+               and self.F[k].t_dec_end < self.n_steps + self.lead + 1]
+        if not due:
+            return False
+        first = 1 if self.last_decider == 0 else 0
+        due.sort(key=lambda k: (self.F[k].t_dec_end, 0 if k == first else 1))
+        instants = []
+        for k in due:
+            f = self.F[k]
+            t_e = f.t_dec_end
+            world = self.world_at(t_e, t, initial_world)
+            si, sf = to_sample(self.tables, world, k)
+            obs = Observation(float(sf[ksim.SF_R]), float(sf[ksim.SF_TH_SELF]), float(sf[ksim.SF_TH_OTHER]),
+                              int(si[ksim.SI_MSELF]), int(si[ksim.SI_MOTHER]), int(si[ksim.SI_FOTHER]),
+                              int(si[ksim.SI_MASK]))
+            menu = self.tables.menu(int(world.action[k]))
+            ctx = DecisionContext(k, t_e / 30.0, obs, menu, world,
+                                  self.features(k) if initial_world is None else np.zeros(14), dict(f.reward),
+                                  f.steps_since)
+            a = int(self.agents[k].decide(ctx))
+            if a not in set(int(x) for x in menu):
+                raise ValueError(f"agent {self.agents[k].name} chose {a}, not in Next({int(world.action[k])})")
+            f.reward = _zero_reward()
+            f.steps_since = 0
+            prev = int(world.action[k])
+            pose = (float(world.x[k]), float(world.z[k]), float(world.heading[k]))
+            f.n_inst += 1
+            inst = f.n_inst
+            f.segments.append(_Segment(t_e, a, inst))
+            f.resolved[inst] = 0
+            self._write_segment(k, t_e, a, prev, pose, inst)
+            f.t_dec_end = t_e + int(self.nf[a]) - 1
+            self.last_decider = k
+            label = self.lib.labels[a]
+            self.decisions.append({"t": round(t_e / 30.0, 4), "player": k, "action": a, "label": label,
+                                   "kind": label, "distance_m": round(float(sf[ksim.SF_R]), 4),
+                                   "theta_self": round(float(sf[ksim.SF_TH_SELF]), 4),
+                                   "theta_other": round(float(sf[ksim.SF_TH_OTHER]), 4),
+                                   "m_other": int(si[ksim.SI_MOTHER]), "f_other": int(si[ksim.SI_FOTHER]),
+                                   "decided_at": round(t / 30.0, 4)})
+            if t_e not in instants:
+                instants.append(t_e)
+        for t_e in instants:
+            self._predict(t_e, t, initial_world)
+        return True
+
+    def _predict(self, t_e: int, t_now: int, initial_world=None) -> None:
+        """Planned hits: the kinematic simulator from the coupled state at t_e to the next decision."""
+        from igraph_fight import sim as ksim
+        from igraph_fight.state import advance
+        if any(f.down for f in self.F):
+            return
+        if self._trace_tables is None:
+            from dataclasses import replace
+            self._trace_tables = replace(self.tables, params=replace(self.tables.params, max_event_frames=1))
+        world = self.world_at(t_e, t_now, initial_world)
+        insts = [self.F[k].action_frame(t_e, self.nf)[2] for k in range(2)]
+        nf = self.nf
+        frames = 0
+        while frames < 400:
+            if any(world.frame[i] >= nf[world.action[i]] - 1 for i in (0, 1)):
+                break
+            before = world.resolved.copy()
+            world, ev = advance(self._trace_tables, world)
+            frames += ev.frames
+            if ev.frames == 0:
+                break
+            for i in (0, 1):
+                new = int(world.resolved[i]) & ~int(before[i])
+                if not new:
+                    continue
+                nh = int(round(ev.hits[i]))
+                a = int(world.action[i])
+                s0 = int(self.lib.strike_offsets[a])
+                bits = [j for j in range(int(self.lib.strike_offsets[a + 1]) - s0) if new >> j & 1]
+                self.F[i].resolved[insts[i]] = self.F[i].resolved.get(insts[i], 0) | new
+                for j in bits[:nh]:
+                    self.planned_events.append({
+                        "t": round((t_e + frames) / 30.0, 4), "step": t_e + frames, "attacker": i, "victim": 1 - i,
+                        "action": a, "kind": self.lib.labels[a], "strike": j, "inst": insts[i],
+                        "frame": int(world.frame[i])})
+
+    # ------------------------------------------------------------------ contacts and hits
+    def _substep(self, d: mujoco.MjData, s: int) -> None:
+        n = d.ncon
+        if n == 0:
+            return
+        g = d.contact.geom[:n]
+        g0, g1 = g[:, 0], g[:, 1]
+        fo0, fo1 = self.fist_owner[g0], self.fist_owner[g1]
+        to0, to1 = self.target_owner[g0], self.target_owner[g1]
+        m1 = (fo0 >= 0) & (to1 >= 0) & (fo0 != to1)
+        m2 = (fo1 >= 0) & (to0 >= 0) & (fo1 != to0)
+        idx = np.nonzero(m1 | m2)[0]
+        if len(idx) == 0:
+            return
+        f6 = np.zeros(6)
+        tot = np.zeros(2)
+        clip = self.config.force_clip_n
+        for i in idx:
+            mujoco.mj_contactForce(self.model, d, int(i), f6)
+            force = abs(float(f6[0]))
+            if m1[i]:
+                fg, tg = int(g0[i]), int(g1[i])
+            else:
+                fg, tg = int(g1[i]), int(g0[i])
+            a = int(self.fist_owner[fg])
+            self._sub_hits.append((a, int(self.fist_side[fg]), int(self.target_owner[tg]), int(self.target_kind[tg]),
+                                   force))
+            tot[a] += min(force, clip)
+        np.maximum(self._step_force, tot, out=self._step_force)
+
+    def _after_step(self, t: int, info) -> None:
+        """Judge the contacts of the step's substeps (hits, touches), accumulate rewards."""
+        cfg = self.config
+        lib = self.lib
+        touching = [False, False]
+        if self._sub_hits:
+            judged = set()
+            for (a, side, b, tk, force) in self._sub_hits:
+                if self.F[a].down or self.F[b].down or force < cfg.hit_force_n:
+                    continue
+                touching[a] = True
+                if (a, side) in judged:
+                    continue
+                hit = self._strike_for(a, side, t)
+                if hit is None:
+                    continue
+                seg, j = hit
+                judged.add((a, side))
+                bit = 1 << j
+                fa = self.F[a]
+                fa.realised[seg.inst] = fa.realised.get(seg.inst, 0) | bit
+                fa.resolved[seg.inst] = fa.resolved.get(seg.inst, 0) | bit
+                planned = any(p["attacker"] == a and p["inst"] == seg.inst and p["strike"] == j
+                              for p in self.planned_events)
+                self.hit_events.append({"t": round(t / 30.0, 4), "frame": t, "attacker": a, "victim": b,
+                                        "action": seg.action, "kind": lib.labels[seg.action], "strike": j,
+                                        "inst": seg.inst, "target": TARGET_LABELS[tk], "fist": EFFECTOR_LABELS[side],
+                                        "force_n": round(force, 2), "planned": bool(planned)})
+            for a in (0, 1):
+                if touching[a] and not self.F[a].touching and not any(
+                        h["attacker"] == a and h["frame"] == t for h in self.hit_events):
+                    best = max((x for x in self._sub_hits if x[0] == a), key=lambda x: x[4])
+                    self.touch_events.append({"t": round(t / 30.0, 4), "attacker": a, "victim": 1 - a,
+                                              "target": TARGET_LABELS[best[3]], "fist": EFFECTOR_LABELS[best[1]],
+                                              "force_n": round(best[4], 2)})
+        for a in (0, 1):
+            self.F[a].touching = touching[a]
+        # rewards (per control step, the competitive-sports paper's terms)
+        d = self.env.data
+        given = self._step_force if not (self.F[0].down or self.F[1].down) else np.zeros(2)
+        self.damage += given
+        p0, p1 = self.pelvis_xy(0), self.pelvis_xy(1)
+        l = float(np.linalg.norm(p1 - p0))
+        kappa = 1.0 - np.exp(-50.0 * max(0.0, l - 1.0) ** 2)
+        gaps = []
+        for k in (0, 1):
+            f = self.F[k]
+            o = 1 - k
+            v = (p1 - p0) if k == 0 else (p0 - p1)
+            v = v / max(np.linalg.norm(v), 1e-9)
+            h = self.fighting_heading(k, t)
+            # facing vector in MuJoCo axes: mocap heading h faces (sin h, cos h) in (x, z) -> (x, -y)
+            fv = np.array([np.sin(h), -np.cos(h)])
+            qv = d.qvel[self.fms[k].qvel_slice][6:].copy()
+            energy = 0.0
+            if self._prev_v[k] is not None:
+                acc = (qv - self._prev_v[k]) * self.env.config.control_hz
+                energy = float(kappa * (acc @ acc))
+            self._prev_v[k] = qv
+            gap = self._fist_target_distance(k, o)
+            gaps.append(gap)
+            inc = {"match": float(given[k] - given[o]), "given_n": float(given[k]), "received_n": float(given[o]),
+                   "close": float(np.exp(-3.0 * gap ** 2)),
+                   "facing": float(np.exp(-5.0 * abs(float(v @ fv) - 1.0))), "energy": energy}
+            for key, val in inc.items():
+                f.reward[key] += val
+                f.reward_total[key] += val
+            f.steps_since += 1
+        self._gap = min(gaps)
+
+    def _strike_for(self, a: int, side: int, t: int):
+        """(segment, strike index) of a's strike whose (widened) window holds step t and that has not
+        landed yet, for fist ``side``; looks at the current and the previous action instance."""
+        f = self.F[a]
+        lo, hi = self.config.window_slack
+        lib = self.lib
+        segs = [s for s in f.segments[-3:] if s.t0 <= t and not s.hold and s.inst >= 0]
+        for seg in reversed(segs):
+            fr = t - seg.t0
+            a_id = seg.action
+            s0, s1 = int(lib.strike_offsets[a_id]), int(lib.strike_offsets[a_id + 1])
+            done = f.realised.get(seg.inst, 0)
+            for j in range(s1 - s0):
+                k = s0 + j
+                if done >> j & 1:
+                    continue
+                if self.strike_side[k] >= 0 and self.strike_side[k] != side:
+                    continue
+                if int(lib.strike_w0[k]) - lo <= fr < int(lib.strike_w1[k]) + hi:
+                    return seg, j
+        return None
+
+    # ------------------------------------------------------------------ falls
+    def _falls_and_resets(self, t: int, info) -> bool:
+        cfg = self.config
+        changed = False
+        for k in (0, 1):
+            f = self.F[k]
+            if not f.down and info.fall[k] is not None:
+                f.down = True
+                f.reset_at = t + max(1, int(round(cfg.fall_pause_s * 30)))
+                f.reward["fall"] += 1.0
+                f.reward_total["fall"] += 1.0
+                g = int(self.rng.choice(self.setup.game.start_actions))
+                f.n_inst += 1
+                f.segments = [s for s in f.segments if s.t0 <= t]
+                f.segments.append(_Segment(t, g, -f.n_inst, hold=True))
+                f.pending_guard = g
+                f.fall_pose = (self.pelvis_xy(k), self.fighting_heading(k, t))
+                self._hold_after(k, t)
+                f.t_dec_end = f.reset_at + int(self.nf[g]) - 1
+                self.fall_events.append({"t": round(t / 30.0, 4), "player": k, "reason": info.fall[k],
+                                         "reset_t": round(f.reset_at / 30.0, 4)})
+                changed = True
+            elif f.down and t >= f.reset_at:
+                self._reset_fighter(k, t)
+                changed = True
+        return changed
+
+    def _reset_fighter(self, k: int, t: int) -> None:
+        f = self.F[k]
+        o = 1 - k
+        g = f.pending_guard
+        xy, h = f.fall_pose
+        xy = xy.copy()
+        oxy = self.pelvis_xy(o)
+        dv = xy - oxy
+        dist = float(np.linalg.norm(dv))
+        if dist < self.config.reset_min_distance_m:
+            u = dv / dist if dist > 1e-6 else np.array([1.0, 0.0])
+            xy = oxy + u * self.config.reset_min_distance_m
+        f.n_inst += 1
+        inst = f.n_inst
+        f.segments.append(_Segment(t, g, inst))
+        f.resolved[inst] = 0
+        self._write_segment(k, t, g, None, (float(xy[0]), float(-xy[1]), h), inst)
+        fm = self.fms[k]
+        d = self.env.data
+        d.qpos[fm.qpos_slice] = f.ref.qpos[t]
+        d.qvel[fm.qvel_slice] = f.ref.qvel[t]
+        mujoco.mj_forward(self.model, d)
+        f.down = False
+        f.t_dec_end = t + int(self.nf[g]) - 1
+        self._prev_v[k] = None
+        self.notes.append({"t": round(t / 30.0, 4), "note": f"{'AB'[k]} reset to guard after a fall"})
+
+    # ------------------------------------------------------------------ trace and result
+    def _record(self, tr: dict) -> None:
+        t = self.env.t
+        poses, acts, frs = [], [], []
+        for k in range(2):
+            xy = self.pelvis_xy(k)
+            poses.append([xy[0], -xy[1], self.fighting_heading(k, t)])
+            a, fr, _ = self.F[k].action_frame(t, self.nf)
+            acts.append(a)
+            frs.append(fr)
+        tr["t"].append(t / 30.0)
+        tr["pose"].append(poses)
+        tr["action"].append(acts)
+        tr["frame"].append(frs)
+        tr["distance"].append(float(np.hypot(poses[1][0] - poses[0][0], poses[1][1] - poses[0][1])))
+        tr["down"].append([self.F[0].down, self.F[1].down])
+        if self.config.record_qpos:
+            tr["qpos"].append(self.env.data.qpos.copy())
+
+    def _result(self, seed: int, tr: dict, wall: float) -> PhysicsBoutResult:
+        trace = {k: np.array(v) for k, v in tr.items()}
+        hits = np.zeros(2)
+        for h in self.hit_events:
+            hits[h["attacker"]] += 1
+        planned = np.zeros(2)
+        pr = np.zeros(2)
+        ps = np.zeros(2)
+        psr = np.zeros(2)
+        down = trace["down"]
+        landed = {(h["attacker"], h["inst"], h["strike"]) for h in self.hit_events}
+        for p in self.planned_events:
+            if p["step"] > self.env.t:
+                continue
+            a = p["attacker"]
+            planned[a] += 1
+            ok = (a, p["inst"], p["strike"]) in landed
+            p["realised"] = ok
+            pr[a] += ok
+            s = min(p["step"], len(down) - 1)
+            lo = max(0, s - 12)
+            if not down[lo:s + 1].any():
+                ps[a] += 1
+                psr[a] += ok
+        self.planned_events = [p for p in self.planned_events if p["step"] <= self.env.t]
+        falls = np.array([sum(1 for e in self.fall_events if e["player"] == k) for k in (0, 1)])
+        touches = np.array([sum(1 for e in self.touch_events if e["attacker"] == k) for k in (0, 1)])
+        c = self.config
+        rewards = []
+        for f in self.F:
+            r = {k: round(v, 4) for k, v in f.reward_total.items()}
+            r["total"] = round(r["match"] + c.w_close * r["close"] + c.w_facing * r["facing"]
+                               - c.w_energy * r["energy"] - c.w_penalty * r["fall"], 4)
+            rewards.append(r)
+        info = []
+        for ag in self.agents:
+            d = {"name": ag.name}
+            if hasattr(ag, "off_graph"):
+                d.update(decisions=ag.decisions, off_graph=ag.off_graph)
+            info.append(d)
+        return PhysicsBoutResult(
+            (self.agents[0].name, self.agents[1].name), self.sim_s, seed, hits, planned, pr, ps, psr, falls,
+            self.damage.copy(), touches, self.decisions, self.hit_events, self.planned_events, self.fall_events,
+            self.touch_events, self.notes, trace, rewards, wall, self.sim_s,
+            getattr(self.tracker, "describe", lambda: getattr(self.tracker, "name", "?"))(), info)
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers
+
+
+def _yaw_rot(h: float) -> np.ndarray:
+    """Rotation by h about MuJoCo's +Z (a mocap heading h is a MuJoCo yaw of +h)."""
+    c, s = np.cos(h), np.sin(h)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _yaw_quat(h: float) -> np.ndarray:
+    return np.array([np.cos(h / 2), 0.0, 0.0, np.sin(h / 2)])
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a (4,) times b (..., 4), quaternions (w, x, y, z)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
+
+
+def _slerp(q_to: np.ndarray, q_from: np.ndarray, w_from: float) -> np.ndarray:
+    """Per-row slerp of unit quaternions (N, 4): weight w_from on q_from (sign-aligned)."""
+    dot = (q_to * q_from).sum(-1)
+    q_from = np.where(dot[:, None] < 0, -q_from, q_from)
+    dot = np.abs(dot).clip(-1.0, 1.0)
+    th = np.arccos(dot)
+    s = np.sin(th)
+    small = s < 1e-6
+    a = np.where(small, 1.0 - w_from, np.sin((1.0 - w_from) * th) / np.where(small, 1.0, s))
+    b = np.where(small, w_from, np.sin(w_from * th) / np.where(small, 1.0, s))
+    q = a[:, None] * q_to + b[:, None] * q_from
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _yaws(q_wxyz: np.ndarray, lateral: np.ndarray) -> np.ndarray:
+    """Yaw of the body-fixed ``lateral`` direction for each quaternion (w, x, y, z)."""
+    w, x, y, z = q_wxyz[:, 0], q_wxyz[:, 1], q_wxyz[:, 2], q_wxyz[:, 3]
+    lx, ly, lz = lateral
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    return np.arctan2(r10 * lx + r11 * ly + r12 * lz, r00 * lx + r01 * ly + r02 * lz)
+
+
+
+
+# ----------------------------------------------------------------------------------------------
+# artifacts: JSONL log + summary (the kinematic bouts' format), plots, MP4
+
+
+def to_bout_result(res: PhysicsBoutResult):
+    """The result as igraph_fight.match.BoutResult (for the kinematic bouts' artifact writer)."""
+    from igraph_fight.match import BoutResult
+    tr = res.trace
+    trace = {"t": tr["t"], "pose": tr["pose"], "action": tr["action"], "frame": tr["frame"], "distance": tr["distance"]}
+    hits = [{k: h[k] for k in ("t", "frame", "attacker", "victim", "action", "kind")} for h in res.hit_events]
+    return BoutResult(res.names, res.seconds, res.hits.copy(), np.zeros(2), np.zeros(2), res.decisions, hits,
+                      float(np.mean(tr["distance"])) if len(tr["distance"]) else float("nan"), res.wall_s, trace,
+                      list(res.notes))
+
+
+def write_physics_artifacts(bout: PhysicsBout, res: PhysicsBoutResult, out: str | os.PathLike, title: str = "bout",
+                            video: bool = True, video_fps: float = 15.0, width: int = 640, height: int = 360,
+                            backend: str | None = None) -> dict:
+    """Write log.jsonl and summary.json (the kinematic bouts' format, with physics lines and fields
+    added), distance.png (the kinematic plot), physics.png (distance, cumulative realised and planned
+    hits, falls) and bout.mp4 (ring-side camera). Returns the summary (with ``artifacts``)."""
+    from igraph_fight.match import write_bout_artifacts
+    from motion_graph.atomic import atomic_write_text
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = write_bout_artifacts(bout.setup.game, to_bout_result(res), out, title=title, plots=True, html=False,
+                                 bvh=False)
+    # the physics lines: every hit with its force / target / planned flag, planned hits, falls, touches
+    lines = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines() if l.strip()]
+    lines = [l for l in lines if l["type"] != "hit"]
+    for h in res.hit_events:
+        lines.append({"type": "hit", **h})
+    for p in res.planned_events:
+        lines.append({"type": "planned_hit", **p})
+    for f in res.fall_events:
+        lines.append({"type": "fall", **f})
+    for tch in res.touch_events:
+        lines.append({"type": "touch", **tch})
+    lines.sort(key=lambda l: l["t"])
+    atomic_write_text(out / "log.jsonl", "\n".join(json.dumps(l) for l in lines) + "\n")
+    _plot_physics(res, out / "physics.png", title)
+    paths["plot_physics"] = str(out / "physics.png")
+    if video:
+        try:
+            render_bout_video(bout, res, out / "bout.mp4", fps=video_fps, width=width, height=height, backend=backend)
+            paths["video"] = str(out / "bout.mp4")
+        except RuntimeError as e:   # no GL or no ffmpeg: the rest of the artifacts still stand
+            paths["video_error"] = str(e)
+    summary = res.summary()
+    summary["artifacts"] = dict(paths)
+    summary["artifacts"]["summary"] = str(out / "summary.json")
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
+    return summary
+
+
+def _plot_physics(res: PhysicsBoutResult, path: Path, title: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from motion_graph.atomic import atomic_write
+    tr = res.trace
+    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
+    ax0.plot(tr["t"], tr["distance"], color="#444", lw=1)
+    ax0.set_ylabel("pelvis distance (m)")
+    ax0.set_title(f"{title} (physics): {res.names[0]} (A) vs {res.names[1]} (B), score {res.score:+.0f}")
+    cols = ("#e4572e", "#3fa7d6")
+    for who in (0, 1):
+        ts = [h["t"] for h in res.hit_events if h["attacker"] == who]
+        ax1.step([0.0] + ts + [res.seconds], list(range(len(ts) + 1)) + [len(ts)], where="post", color=cols[who],
+                 label=f"realised hits by {'AB'[who]} ({res.names[who]})")
+        tp = [p["t"] for p in res.planned_events if p["attacker"] == who]
+        ax1.step([0.0] + tp + [res.seconds], list(range(len(tp) + 1)) + [len(tp)], where="post", color=cols[who],
+                 ls="--", lw=1, label=f"planned hits by {'AB'[who]}")
+        for f in res.fall_events:
+            if f["player"] == who:
+                for ax in (ax0, ax1):
+                    ax.axvspan(f["t"], f["reset_t"], color=cols[who], alpha=0.15, lw=0)
+    ax1.set_ylabel("cumulative hits")
+    ax1.set_xlabel(f"time (s); shaded: fallen (A {int(res.falls[0])} falls, B {int(res.falls[1])} falls)")
+    ax1.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=80))
+    plt.close(fig)
+
+
+def render_bout_video(bout: PhysicsBout, res: PhysicsBoutResult, path: str | os.PathLike, fps: float = 15.0,
+                      width: int = 640, height: int = 360, backend: str | None = None,
+                      max_seconds: float | None = None, shadows: bool = False) -> Path:
+    """MP4 of the bout from a ring-side camera (MuJoCo offscreen, EGL else OSMesa), with a caption
+    (time, hits, falls, the actions playing). The camera looks at the fighters' midpoint from the
+    side of the line joining them (smoothed), backing off as they separate."""
+    from .render import OffscreenRenderer, _label
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        raise RuntimeError("MP4 output needs imageio-ffmpeg") from None
+    tr = res.trace
+    if not len(tr.get("qpos", [])):
+        raise RuntimeError("the bout was run without BoutConfig.record_qpos")
+    m = bout.model
+    d = mujoco.MjData(m)
+    step = max(1, int(round(30.0 / fps)))
+    n = len(tr["qpos"]) if max_seconds is None else min(len(tr["qpos"]), int(max_seconds * 30) + 1)
+    idx = list(range(0, n, step))
+    r = OffscreenRenderer(m, width, height, backend)
+    r.opt.geomgroup[4] = 0
+    if not shadows:   # shadows cost 2-3x per frame on a software renderer (Mesa llvmpipe)
+        r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
+    r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
+    w2, h2 = r.width - r.width % 2, r.height - r.height % 2
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = imageio_ffmpeg.write_frames(str(path), (w2, h2), fps=30.0 / step, codec="libx264", pix_fmt_out="yuv420p",
+                                         macro_block_size=1, quality=6)
+    writer.send(None)
+    hits_t = [[h["t"] for h in res.hit_events if h["attacker"] == k] for k in (0, 1)]
+    falls_t = [[f["t"] for f in res.fall_events if f["player"] == k] for k in (0, 1)]
+    lib = bout.lib
+    az = None
+    look = None
+    try:
+        for i in idx:
+            d.qpos[:] = tr["qpos"][i]
+            mujoco.mj_kinematics(m, d)
+            p0 = d.xpos[bout.fms[0].pelvis_body]
+            p1 = d.xpos[bout.fms[1].pelvis_body]
+            mid = 0.5 * (p0 + p1)
+            mid[2] = 1.0
+            sep = float(np.linalg.norm((p1 - p0)[:2]))
+            line = np.degrees(np.arctan2(p1[1] - p0[1], p1[0] - p0[0]))
+            want = line + 90.0
+            if az is None:
+                az, look = want, mid.copy()
+            else:
+                # the side of the line nearer the current azimuth, then smooth (about 1.5 s)
+                cand = [want + 360.0 * j for j in (-2, -1, 0, 1, 2)] + [want + 180.0 + 360.0 * j for j in (-2, -1, 0, 1)]
+                want = min(cand, key=lambda c: abs(c - az))
+                a = 1.0 - np.exp(-step / 45.0)
+                az += a * (want - az)
+                look += (1.0 - np.exp(-step / 15.0)) * (mid - look)
+            img = r.render(d, look, azimuth=az, elevation=-12.0, distance=max(3.2, 1.3 * sep + 2.2))
+            t = tr["t"][i]
+            acts = tr["action"][i]
+            down = tr["down"][i]
+            ha = [sum(1 for x in hits_t[k] if x <= t + 1e-9) for k in (0, 1)]
+            fa = [sum(1 for x in falls_t[k] if x <= t + 1e-9) for k in (0, 1)]
+            cap = (f"t={t:5.1f}s  A(red) {res.names[0]}: hits {ha[0]} falls {fa[0]}  |  "
+                   f"B(blue) {res.names[1]}: hits {ha[1]} falls {fa[1]}")
+            img = _label(img, cap)
+            sub = "  ".join(f"{'AB'[k]}: {'DOWN' if down[k] else lib.labels[int(acts[k])]}" for k in (0, 1))
+            flash = [k for k in (0, 1) if any(t - 0.3 < x <= t + 1e-9 for x in hits_t[k])]
+            if flash:
+                sub += "   " + " ".join(f"HIT by {'AB'[k]}" for k in flash)
+            img = _label_bottom(img, sub)
+            writer.send(np.ascontiguousarray(img[:h2, :w2]))
+    finally:
+        writer.close()
+        r.close()
+    return path
+
+
+def _label_bottom(img: np.ndarray, text: str) -> np.ndarray:
+    from PIL import Image, ImageDraw
+    im = Image.fromarray(img)
+    dr = ImageDraw.Draw(im)
+    h = im.size[1]
+    dr.rectangle([0, h - 19, 8 + 7 * len(text), h], fill=(0, 0, 0))
+    dr.text((4, h - 16), text, fill=(255, 255, 160))
+    return np.asarray(im)
+
+
+# ----------------------------------------------------------------------------------------------
+# entry points: `igraph-fight fight --physics ...` and `python -m tracker.bout fight ...`
+
+
+def load_tracker(spec: str | None = None):
+    """The tracking controller: ``"pd"``, a checkpoint path, or None for the shipped learned policy
+    (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing).
+    The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
+    spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
+    if spec == "pd":
+        from .pd import PDController
+        return PDController()
+    from .policy import DEFAULT_CKPT, load_policy
+    if spec is None and not DEFAULT_CKPT.is_file():
+        from .pd import PDController
+        print(f"tracker.bout: no learned tracker at {DEFAULT_CKPT}; tracking with PD "
+              "(give a checkpoint with IGRAPH_FIGHT_TRACKER=PATH)", file=sys.stderr)
+        return PDController()
+    return load_policy(spec)
+
+
+def make_agent(spec: str, graph, library, depth: int, setup: BoutSetup | None = None):
+    """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
+    ``rl`` or ``rl:CKPT`` the physics RL baseline (tracker.physics_rl)."""
+    if spec == "rl" or spec.startswith("rl:"):
+        from .physics_rl import load_rl_agent
+        return load_rl_agent(spec[3:] or None, library)
+    from igraph_fight.controller import NPCController
+    npc = NPCController(graph, library, style=spec, depth=depth)
+    return IGAgent(npc, f"{npc.style}({depth})")
+
+
+def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxer", depth_a: int = 5,
+                      depth_b: int = 5, seconds: float = 60.0, seed: int = 1, out: str | os.PathLike = "out/fight",
+                      library=None, swap_a: tuple[float, str] | None = None, tracker: str | None = None,
+                      video: bool = True, video_fps: float = 15.0, width: int = 640, height: int = 360,
+                      root_assist: bool = False, progress: bool = False, config: BoutConfig | None = None) -> dict:
+    """One physics bout from a graph file to artifacts (the physics twin of igraph_fight.bouts.run_style_bout).
+    Returns the summary dict (see PhysicsBoutResult.summary, plus ``artifacts``)."""
+    from igraph_fight.graph import load_graph
+    g = load_graph(graph) if not hasattr(graph, "arrays") else graph
+    if library is not None and not hasattr(library, "n_actions"):
+        from motion_graph.library import load_library
+        library = load_library(library)
+    lib = library if library is not None else g.load_library()
+    sim_opts = g.header.get("options", {}).get("sim")
+    from igraph_fight.sim import SimParams
+    setup = BoutSetup.create(lib, sim_params=SimParams(**sim_opts) if sim_opts else None, root_assist=root_assist)
+    agents = [make_agent(style_a, g, lib, depth_a, setup), make_agent(style_b, g, lib, depth_b, setup)]
+    trk = load_tracker(tracker)
+    cfg = config or BoutConfig(seconds=seconds)
+    if cfg.seconds != seconds:
+        from dataclasses import replace
+        cfg = replace(cfg, seconds=seconds)
+    bout = PhysicsBout(setup, agents, trk, cfg)
+    if swap_a is not None:
+        t_sw, st = swap_a
+        a0 = agents[0]
+        if not isinstance(a0, IGAgent):
+            raise ValueError("--swap-a needs an Interaction Graph fighter as A")
+
+        def do_swap() -> None:
+            a0.controller.set_style(st, wait=True)
+            a0.name = f"{a0.name}->{st}"
+
+        bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))
+    res = bout.run(seed=seed, progress=progress)
+    title = f"{style_a} vs {style_b}" + (" [root assist: not physics]" if root_assist else "")
+    summary = write_physics_artifacts(bout, res, out, title=title, video=video, video_fps=video_fps, width=width,
+                                      height=height)
+    summary["root_assist"] = bool(root_assist)
+    summary["machine_load"] = _load_average()
+    from motion_graph.atomic import atomic_write_text
+    atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
+    return summary
+
+
+def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_bouts: int = 10, seconds: float = 60.0,
+               depth_a: int = 5, depth_b: int = 5, seed0: int = 0, tracker: str | None = None,
+               root_assist: bool = False, log=print) -> dict:
+    """``n_bouts`` physics bouts (seeds seed0..) between two agents (styles or rl[:CKPT]); the
+    per-bout summaries and the aggregate: mean / std score, falls per fighter per minute, planned
+    and realised hits (ratio over all bouts), mean real-time factor."""
+    from igraph_fight.graph import load_graph
+    g = load_graph(graph) if not hasattr(graph, "arrays") else graph
+    lib = g.load_library()
+    setup = BoutSetup.create(lib, root_assist=root_assist)
+    agents = [make_agent(style_a, g, lib, depth_a, setup), make_agent(style_b, g, lib, depth_b, setup)]
+    trk = load_tracker(tracker)
+    rows = []
+    for i in range(n_bouts):
+        bout = PhysicsBout(setup, agents, trk, BoutConfig(seconds=seconds, record_qpos=False))
+        s = bout.run(seed=seed0 + i).summary()
+        s.pop("agents", None)
+        rows.append(s)
+        log(f"seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), falls "
+            f"{s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
+            f"unplanned {s['unplanned_hits']:.0f}, distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")
+    tot = lambda k: float(sum(r[k] for r in rows))  # noqa: E731
+    sc = np.array([r["score"] for r in rows])
+    minutes = n_bouts * seconds / 60.0
+    p = tot("planned_hits")
+    return {"a": style_a, "b": style_b, "n_bouts": n_bouts, "seconds": seconds, "root_assist": root_assist,
+            "tracker": rows[0]["tracker"] if rows else None,
+            "mean_score": float(sc.mean()), "std_score": float(sc.std()), "wins_a": int((sc > 0).sum()),
+            "losses_a": int((sc < 0).sum()), "hits_a": tot("hits_a"), "hits_b": tot("hits_b"),
+            "falls_per_min_a": tot("falls_a") / minutes, "falls_per_min_b": tot("falls_b") / minutes,
+            "planned_hits": p, "planned_realised": tot("planned_realised"),
+            "planned_realised_ratio": tot("planned_realised") / p if p else None,
+            "unplanned_hits": tot("unplanned_hits"), "mean_distance_m": tot("mean_distance_m") / max(n_bouts, 1),
+            "realtime_factor_mean": tot("realtime_factor") / max(n_bouts, 1), "bouts": rows}
+
+
+def _load_average() -> list[float] | None:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
+
+
+def format_summary(s: dict) -> str:
+    def pct(x):
+        return "n/a" if x is None else f"{100 * x:.0f}%"
+    lines = [
+        f"{s['a']} (A) vs {s['b']} (B), {s['seconds']:.1f} s physics bout (seed {s['seed']}): hits A {s['hits_a']:.0f}, "
+        f"hits B {s['hits_b']:.0f}, score {s['score']:+.0f}, mean distance {s['mean_distance_m']:.2f} m",
+        f"  falls: A {s['falls_a']} ({s['falls_per_min_a']:.1f}/min), B {s['falls_b']} ({s['falls_per_min_b']:.1f}/min)",
+        f"  planned hits {s['planned_hits']:.0f} (A {s['planned_hits_a']:.0f}, B {s['planned_hits_b']:.0f}), realised "
+        f"{s['planned_realised']:.0f} ({pct(s['planned_realised_ratio'])}; while both stood: "
+        f"{pct(s['planned_realised_ratio_standing'])}); unplanned hits {s['unplanned_hits']:.0f}; "
+        f"touches A {s['touches_a']} B {s['touches_b']}",
+        f"  clipped fist force given: A {s['damage_n_a']:.0f} N, B {s['damage_n_b']:.0f} N (sum over control steps)",
+        f"  real-time factor {s['realtime_factor']:.2f}x (rendering excluded; load {s.get('machine_load')}); "
+        f"tracker: {s['tracker']}",
+    ]
+    if s.get("root_assist"):
+        lines.append("  ROOT ASSIST ON: pelvises held on the references by welds; not physics, falls impossible")
+    for k, v in s["artifacts"].items():
+        lines.append(f"  {k}: {v}")
+    return "\n".join(lines)
+
+
+def cmd_physics_fight(args: argparse.Namespace) -> int:
+    """`igraph-fight fight --physics`: args of igraph_fight.cli_fight (graph, library, a, b, depth_a,
+    depth_b, swap_a, seconds, seed, out, json); optional attributes tracker, video, video_fps,
+    root_assist (python -m tracker.bout fight sets them; IGRAPH_FIGHT_TRACKER and
+    IGRAPH_FIGHT_VIDEO=0 are the environment defaults)."""
+    swap = None
+    if getattr(args, "swap_a", None):
+        t, _, style = args.swap_a.partition(":")
+        swap = (float(t), style)
+    video = getattr(args, "video", None)
+    if video is None:
+        video = os.environ.get("IGRAPH_FIGHT_VIDEO", "1") not in ("0", "false", "no")
+    try:
+        summary = run_physics_fight(args.graph, args.a, args.b, args.depth_a, args.depth_b, args.seconds, args.seed,
+                                    args.out, library=args.library, swap_a=swap,
+                                    tracker=getattr(args, "tracker", None), video=video,
+                                    video_fps=float(getattr(args, "video_fps", 15.0) or 15.0),
+                                    root_assist=bool(getattr(args, "root_assist", False)),
+                                    progress=not args.json)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"igraph-fight: error: {e}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tracker.bout", description="physics bouts (tracker.bout)")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("fight", help="one physics bout with artifacts (igraph-fight fight --physics, more options)")
+    f.add_argument("--graph", required=True)
+    f.add_argument("--library", default=None)
+    f.add_argument("--a", default="infighter", help="style, or rl[:CKPT] for the physics RL baseline")
+    f.add_argument("--b", default="outboxer")
+    f.add_argument("--depth-a", type=int, default=5)
+    f.add_argument("--depth-b", type=int, default=5)
+    f.add_argument("--swap-a", default=None)
+    f.add_argument("--seconds", type=float, default=60.0)
+    f.add_argument("--seed", type=int, default=1)
+    f.add_argument("--out", default="out/fight")
+    f.add_argument("--tracker", default=None, help="tracking policy checkpoint, or 'pd' (default: the shipped one)")
+    f.add_argument("--no-video", dest="video", action="store_false", default=True)
+    f.add_argument("--video-fps", type=float, default=15.0)
+    f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
+    f.add_argument("--json", action="store_true")
+    r = sub.add_parser("series", help="N physics bouts between two agents, aggregated (no artifacts)")
+    r.add_argument("--graph", required=True)
+    r.add_argument("--a", default="infighter")
+    r.add_argument("--b", default="outboxer")
+    r.add_argument("--depth-a", type=int, default=5)
+    r.add_argument("--depth-b", type=int, default=5)
+    r.add_argument("--bouts", type=int, default=10)
+    r.add_argument("--seconds", type=float, default=60.0)
+    r.add_argument("--seed0", type=int, default=0)
+    r.add_argument("--tracker", default=None)
+    r.add_argument("--root-assist", action="store_true")
+    r.add_argument("--out", default=None, help="write the result (with every bout's summary) as JSON")
+    a = p.parse_args(argv)
+    if a.cmd == "fight":
+        return cmd_physics_fight(a)
+    if a.cmd == "series":
+        res = run_series(a.graph, a.a, a.b, a.bouts, a.seconds, a.depth_a, a.depth_b, a.seed0, a.tracker,
+                         a.root_assist, log=lambda x: print(x, flush=True))
+        if a.out:
+            Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(a.out).write_text(json.dumps(res, indent=1))
+        print(json.dumps({k: v for k, v in res.items() if k != "bouts"}, indent=1))
+        return 0
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

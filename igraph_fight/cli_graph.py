@@ -21,6 +21,17 @@ def _pair(text: str) -> tuple[float, float]:
     return r, math.radians(d)
 
 
+def _share_deg(text: str) -> tuple[float, float]:
+    """'SHARE,DEG' -> (share in [0, 1], degrees in (0, 180])."""
+    try:
+        share, deg = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SHARE,DEGREES (e.g. 0.75,30), got {text!r}") from None
+    if not 0 <= share <= 1 or not 0 < deg <= 180:
+        raise argparse.ArgumentTypeError("the share must be in [0, 1] and the angle in (0, 180] degrees")
+    return share, deg
+
+
 def register(sub) -> None:
     p = sub.add_parser("build", help="explore, cluster and link an Interaction Graph from mocap or a library",
                        description="Build an Interaction Graph. The sampler's archive is checkpointed to "
@@ -38,6 +49,9 @@ def register(sub) -> None:
                    help="landing tolerance of an edge around its target state (default 0.15,30)")
     p.add_argument("--f0", type=int, default=None, help="frame window F0 of the other's clip (default 10)")
     p.add_argument("--n-initial", type=int, default=None, help="initial states of the sampler (default 64)")
+    p.add_argument("--initial-facing", type=_share_deg, default=None, metavar="SHARE,DEG",
+                   help="share of the sampler's initial states with both fighters within +-DEG of facing "
+                        "each other (default 0.75,30; the rest take any angle)")
     p.add_argument("--next-threshold", type=float, default=None,
                    help="with --mocap: Next(a) pose threshold of the library (m, default 0.20)")
     p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
@@ -83,6 +97,8 @@ def _options(args: argparse.Namespace):
         kw["f0"] = args.f0
     if args.n_initial is not None:
         kw["n_initial"] = args.n_initial
+    if args.initial_facing is not None:
+        kw["initial_facing_share"], kw["initial_facing_deg"] = float(args.initial_facing[0]), float(args.initial_facing[1])
     if args.no_prune:
         kw["prune_dead_ends"] = False
     opts = dataclasses.replace(BuildOptions(), **kw)

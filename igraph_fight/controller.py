@@ -21,6 +21,16 @@ graph state nearest to where it lands, and takes the best. This is an addition t
 runtime (which only looks the table up: ``offgraph="nearest"``); it costs one simulated event per
 legal action and runs only for off-graph decisions.
 
+``first_ply="exact"`` (opt-in) runs that lookahead for *every* decision, on the graph too: the
+first ply is then exact from the live state over the whole legal menu, and the graph only supplies
+the depth-(D-1) values where each action lands. Measured on the default CMU boxing graph (see
+tests/test_ig_consistency.py for the consistency checks): the graph's edges reproduce the
+simulator exactly from each state's centroid, but a live state within the linking tolerance
+(15 cm, 30 degrees, |F_other difference| < F0) of a state often has another best action than the
+centroid (the exact depth-1 best agrees with the state's table answer about 30% of the time), and
+a state has edges for only part of its menu. The table answer also presumes the live state is
+snapped onto the state; an IGAgent snaps only after table answers (``Decision.edge >= 0``).
+
 The policy table is an immutable object; ``set_style``/``set_depth`` build a new one in a worker
 thread while the old one keeps answering, then replace the reference in one assignment, so a
 reader sees either the old or the new table, never a mix.
@@ -609,14 +619,22 @@ class NPCController:
         temperature: softmax temperature of the roulette (reward units); usage_penalty: divides the
             probability of an edge by (1 + penalty * times used) (per controller).
         seed: seed of the roulette's random generator.
+        offgraph: "lookahead" (default) or "nearest": how off-graph decisions are answered.
+        first_ply: "table" (default: the policy table on the graph, the paper's runtime) or
+            "exact": the simulated one-step lookahead for every decision (module docstring);
+            act() only (act_batch answers from the table as before).
     """
 
     def __init__(self, graph: InteractionGraph | str | Path, library=None, style: Style | str | Path = "balanced",
                  depth: int = 5, gamma: float | None = None, stochastic: bool = False, temperature: float = 0.5,
-                 usage_penalty: float = 0.0, seed: int = 0, offgraph: str = "lookahead") -> None:
+                 usage_penalty: float = 0.0, seed: int = 0, offgraph: str = "lookahead",
+                 first_ply: str = "table") -> None:
         if offgraph not in ("lookahead", "nearest"):
             raise ValueError("offgraph must be 'lookahead' or 'nearest'")
+        if first_ply not in ("table", "exact"):
+            raise ValueError("first_ply must be 'table' or 'exact'")
         self.offgraph = offgraph
+        self.first_ply = first_ply
         if not isinstance(graph, InteractionGraph):
             graph = load_graph(graph)
         self.graph = graph
@@ -751,7 +769,7 @@ class NPCController:
         a, s, d, off, e = _decide(self._pi, self._pf, *self._ix, self._legal, table.best_me, table.q_me,
                                   float(obs.r), float(obs.theta_self), float(obs.theta_other), int(obs.m_self),
                                   int(obs.m_other), int(obs.f_other), int(obs.mask_other))
-        if off and self.offgraph == "lookahead":
+        if self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
             la, _ = self._lookahead(table, obs)
             if la >= 0:
                 a, e = la, -1

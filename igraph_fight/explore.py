@@ -59,6 +59,8 @@ class ExploreOptions:
     n_initial: int = 256
     initial_r_min_m: float = 0.5
     initial_r_max_m: float = 3.0
+    initial_facing_share: float = 0.0
+    initial_facing_rad: float = math.radians(30.0)
     expand_fraction: float = 0.3
     f0: int = 3
     link_r_m: float = 0.05
@@ -184,7 +186,9 @@ def dedup_insert(ix, nextset, ci, cf, valid, tol_r, tol_t):
 # ---------------------------------------------------------------------------------------------
 def initial_samples(tables: SimTables, options: ExploreOptions, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """A spread of initial canonical samples: both avatars in idle (guard) actions, distances in
-    [initial_r_min_m, initial_r_max_m], all relative angles (drawn with ``seed``)."""
+    [initial_r_min_m, initial_r_max_m], all relative angles (drawn with ``seed``); a share
+    ``initial_facing_share`` of them with both angles within +-``initial_facing_rad`` (facing each
+    other, where every hit happens: with all angles uniform only ~3% of close states face)."""
     from motion_graph.classify import KINDS
 
     rng = np.random.default_rng(seed)
@@ -200,6 +204,9 @@ def initial_samples(tables: SimTables, options: ExploreOptions, seed: int) -> tu
     si[:, SI_FOTHER] = np.floor(rng.random(n) * (tables.n_frames[si[:, SI_MOTHER]] - 1)).astype(np.int64)
     sf[:, SF_R] = rng.uniform(options.initial_r_min_m, options.initial_r_max_m, n)
     sf[:, 1:] = rng.uniform(-np.pi, np.pi, (n, 2))
+    n_face = int(round(options.initial_facing_share * n))
+    if n_face > 0:
+        sf[:n_face, 1:] = rng.uniform(-options.initial_facing_rad, options.initial_facing_rad, (n_face, 2))
     return si, sf
 
 

@@ -52,6 +52,20 @@ def test_sampler_is_deterministic_by_seed(tables):
     assert np.array_equal(ci, a.si[kids]) and np.array_equal(cf, a.sf[kids])
 
 
+def test_initial_states_face_each_other_in_the_requested_share(tables):
+    o = dataclasses.replace(SMALL, n_initial=200, initial_facing_share=0.75, initial_facing_deg=30.0).explore_options()
+    si, sf = explore.initial_samples(tables, o, seed=3)
+    ang = np.abs(sf[:, 1:])
+    facing = np.all(ang <= math.radians(30.0) + 1e-12, axis=1)
+    assert facing[:150].all()
+    # the rest take any angle: most of them are not facing
+    assert facing[150:].mean() < 0.3 and ang[150:].max() > math.radians(120.0)
+    o0 = dataclasses.replace(SMALL, n_initial=200, initial_facing_share=0.0).explore_options()
+    assert np.all(np.abs(explore.initial_samples(tables, o0, seed=3)[1][:, 1:]) <= math.pi)
+    with pytest.raises(ValueError, match="initial_facing_share"):
+        dataclasses.replace(SMALL, initial_facing_share=1.5).validate()
+
+
 def test_sampler_does_not_depend_on_any_reward(built):
     for fn in (explore.explore, build_graph):
         names = " ".join(inspect.signature(fn).parameters)

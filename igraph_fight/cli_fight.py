@@ -30,7 +30,7 @@ def register(sub) -> None:
     p.add_argument("--graph", required=True)
     p.add_argument("--style", default="balanced", help="preset name or style file")
     p.add_argument("--depth", type=int, default=5)
-    p.add_argument("--gamma", type=float, default=None, help="discount (default 1 up to depth 5, else 0.95)")
+    p.add_argument("--gamma", type=float, default=None, help="discount per decision (default planner.DEFAULT_GAMMA, 0.5)")
     p.add_argument("--repeat", type=int, default=5, help="runs to take the median over (default 5)")
     p.add_argument("--out", default=None, help="save the policy table (.npz)")
     p.add_argument("--json", action="store_true")
@@ -77,7 +77,8 @@ def cmd_policy(args: argparse.Namespace) -> int:
     from motion_graph.classify import KINDS
     arrays.setdefault("kinds_table", np.array(KINDS))
     style = load_style(args.style)
-    gamma = args.gamma if args.gamma is not None else (1.0 if args.depth <= 5 else 0.95)
+    from planner import DEFAULT_GAMMA
+    gamma = args.gamma if args.gamma is not None else DEFAULT_GAMMA
     from planner import SearchGraph
     sg = SearchGraph.from_arrays(arrays["state_offsets"], arrays["edge_target"], arrays["edge_swap"])
     times, pol = [], None

@@ -614,7 +614,7 @@ class NPCController:
         library: the graph's action library (needed for menus); default: the one embedded in or
             next to the graph (``graph.load_library()``).
         style: a planner Style, preset name or style file.
-        depth: min-max depth (decisions); gamma: discount (default 1 up to depth 5, else 0.95).
+        depth: min-max depth (decisions); gamma: discount per decision (default planner.DEFAULT_GAMMA = 0.5: see there why).
         stochastic: roulette selection among the state's edges instead of the best edge.
         temperature: softmax temperature of the roulette (reward units); usage_penalty: divides the
             probability of an edge by (1 + penalty * times used) (per controller).
@@ -707,7 +707,8 @@ class NPCController:
     def _compute(self, style: Style, depth: int, gamma: float | None) -> _Table:
         if depth < 1:
             raise ValueError("depth must be >= 1")
-        g = float(gamma) if gamma is not None else (1.0 if depth <= 5 else 0.95)
+        from planner import DEFAULT_GAMMA
+        g = float(gamma) if gamma is not None else DEFAULT_GAMMA
         pol = compute_policy(self._arrays, style, depth, g, search_graph=self._search_graph)
         q = _edge_q(pol, self._offsets, self._target, self._swap)
         with self._lock:

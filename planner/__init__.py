@@ -11,7 +11,7 @@ Typical use (graph = dict of the contract arrays, kinds_table included)::
 """
 from .dp import dp_packed, value_iteration, value_iteration_pair
 from .minmax import balanced_chunks, minmax, minmax_packed, pack_keys, pack_weights
-from .policy import Policy, compute_policy
+from .policy import DEFAULT_GAMMA, Policy, compute_policy
 from .rewards import (COOP_FEATURES, FIGHT_FEATURES, N_DIRECTIONS, cooperative_rewards, direction_vector,
                       edge_rewards, kind_preferences)
 from .search_graph import ORDERINGS, SearchGraph
@@ -22,6 +22,7 @@ from .styles import (ATTACK_KINDS, Style, StyleError, list_presets, load_style, 
 from .synthetic import random_features, synthetic_graph
 
 __all__ = [
+    "DEFAULT_GAMMA",
     "ATTACK_KINDS", "COOP_FEATURES", "FIGHT_FEATURES", "MODES", "N_DIRECTIONS", "ORDERINGS",
     "Policy", "SearchGraph", "Style", "StyleError",
     "balanced_chunks", "compute_policy", "cooperative_rewards", "direction_vector", "dp_packed",

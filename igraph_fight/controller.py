@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import threading
 import time
+import types
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -507,8 +508,18 @@ def _act_batch_py(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, be
 #: act_batch runs batches smaller than this on the calling thread (a parallel region costs a
 #: thread wake-up, milliseconds on a busy machine).
 PARALLEL_MIN = 4096
-_act_batch = njit(cache=True, parallel=True)(_act_batch_py)
-_act_batch_serial = njit(cache=True)(_act_batch_py)
+def _renamed(fn, name: str):
+    """A copy of ``fn`` under another name. numba's on-disk cache is keyed by the function's
+    qualified name and line, not by the compile flags: two dispatchers of one Python function
+    (parallel and serial) shared one cache entry, and whichever compiled first served both (the
+    parallel batch kernel ran on one thread after a serial compile had been cached)."""
+    g = types.FunctionType(fn.__code__, fn.__globals__, name, fn.__defaults__, fn.__closure__)
+    g.__qualname__ = name
+    return g
+
+
+_act_batch = njit(cache=True, parallel=True)(_renamed(_act_batch_py, "_act_batch_parallel_kernel"))
+_act_batch_serial = njit(cache=True)(_renamed(_act_batch_py, "_act_batch_serial_kernel"))
 
 
 def _r_slots(slot: np.ndarray, r: np.ndarray, ts: np.ndarray, to: np.ndarray, sid: np.ndarray, f: np.ndarray,

@@ -277,3 +277,12 @@ def test_roulette_is_reproducible_and_follows_the_scores(graph_lib):
     # more often the better the score
     top, low = int(np.argmax(q)), int(np.argmin(q))
     assert freq[top] > freq[low]
+
+
+def test_parallel_and_serial_batch_kernels_have_distinct_cache_entries():
+    """numba's disk cache is keyed by qualified name and line, not by compile flags: the parallel
+    and serial batch kernels must be distinct functions or one silently serves both."""
+    from igraph_fight import controller as C
+    names = {C._act_batch.py_func.__qualname__, C._act_batch_serial.py_func.__qualname__}
+    assert len(names) == 2
+    assert C._act_batch.targetoptions.get("parallel") and not C._act_batch_serial.targetoptions.get("parallel")

@@ -38,7 +38,11 @@ class BuildOptions:
     puts more states within punching range. Three quarters of the sampler's initial states face
     each other within 30 degrees (initial_facing_*): with uniform angles only ~3% of the close
     states of the graph faced each other and the game-tree fighter's states were covered 34%
-    (61% with facing starts, 4-bout evaluation of 2026-11-26).
+    (61% with facing starts, 4-bout evaluation of 2026-11-26). The sampler also starts from the
+    decision states of 512 reward-free 30 s bouts (human proxy vs random; seeding.py): 20-bout
+    evaluation, seed 0: coverage 46% -> 72%, states without a compatible group 21% -> 0.1%, and
+    the IG fighter's score grows with depth against all five baselines (128 bouts: 63%; 1024:
+    76% with no better scores and a 50% longer build).
 
     tol_*: snapping tolerance of the clustering (bounds a sample's move to its state).
     link_tol_*: tolerance of an edge's landing around its target state (also the sampler's C).
@@ -53,6 +57,8 @@ class BuildOptions:
     initial_r_max_m: float = 2.5
     initial_facing_share: float = 0.75
     initial_facing_deg: float = 30.0
+    seed_bouts: int = 512
+    seed_bout_seconds: float = 30.0
     expand_fraction: float = 0.3
     f0: int = 10
     tol_r_m: float = 0.05
@@ -103,6 +109,8 @@ class BuildOptions:
     def validate(self) -> None:
         if self.max_samples < 1 or self.n_initial < 1 or self.f0 < 1 or self.chunk_parents < 1:
             raise ValueError("max_samples, n_initial, f0 and chunk_parents must be positive")
+        if self.seed_bouts < 0 or self.seed_bout_seconds <= 0:
+            raise ValueError("seed_bouts must be >= 0 and seed_bout_seconds positive")
         if not 0 <= self.initial_facing_share <= 1 or not 0 < self.initial_facing_deg <= 180:
             raise ValueError("initial_facing_share must be in [0, 1] and initial_facing_deg in (0, 180]")
         if not 0 < self.expand_fraction <= 1:
@@ -159,7 +167,12 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
                                                 "library": lib_fp}, indent=1))
     t = time.perf_counter()
     resumed = ckpt is not None and ckpt.exists()
-    arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, on_chunk, workers)
+    extra = None
+    if options.seed_bouts > 0 and not resumed:
+        from .seeding import bout_seed_states
+        extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed)
+    arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, on_chunk, workers,
+                          extra_initial=extra)
     timings["explore_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

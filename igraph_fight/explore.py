@@ -291,7 +291,8 @@ def _load_checkpoint(path: Path, run: _Run) -> dict:
 
 def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: str | os.PathLike | None = None,
             fingerprint: str = "", progress: bool = False,
-            on_chunk: Callable[[int, int], None] | None = None, workers: int = 1) -> Archive:
+            on_chunk: Callable[[int, int], None] | None = None, workers: int = 1,
+            extra_initial: tuple[np.ndarray, np.ndarray] | None = None) -> Archive:
     """Run the sampler and return the archive.
 
     Args:
@@ -305,6 +306,8 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
         on_chunk: called as on_chunk(chunks_done, n_samples) after each checkpoint (tests use it
             to interrupt a run).
         workers: threads (None or 0: all cores); the result does not depend on it.
+        extra_initial: more initial samples (si, sf), appended to the spread (e.g.
+            igraph_fight.seeding.bout_seed_states); duplicates are dropped as usual.
     """
     o = options
     if o.selection not in ("round", "parent"):
@@ -327,6 +330,9 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
         spatial.index_insert_many(ix, point_rows(nextset, run.si[:run.n]), run.sf[:run.n])
     else:
         si0, sf0 = initial_samples(tables, o, seed)
+        if extra_initial is not None and len(extra_initial[0]):
+            si0 = np.concatenate([si0, np.asarray(extra_initial[0], dtype=np.int64)])
+            sf0 = np.concatenate([sf0, np.asarray(extra_initial[1], dtype=np.float64)])
         valid = sf0[:, SF_R] <= o.max_distance_m
         ids = dedup_insert(ix, nextset, si0, sf0, valid, dtr, dtt)
         keep = ids >= 0

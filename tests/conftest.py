@@ -57,7 +57,7 @@ def small_graph(boxing_library):
     options but only SMALL_GRAPH_SAMPLES samples (seed 0, one thread: deterministic). Uses the
     session fixture ``boxing_library`` (defined below)."""
     from igraph_fight.build import BuildOptions, build_graph
-    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=SMALL_GRAPH_SAMPLES), seed=0, workers=1)
+    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=SMALL_GRAPH_SAMPLES, seed_bouts=0), seed=0, workers=1)
     return graph, boxing_library
 
 
@@ -73,7 +73,7 @@ def tiny_graph_file(boxing_library, tmp_path_factory) -> Path:
     """A tiny Interaction Graph of the boxing library (3000 samples, a few seconds), saved with
     its library embedded."""
     from igraph_fight.build import BuildOptions, build_graph
-    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64), seed=0)
+    graph, _ = build_graph(boxing_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64, seed_bouts=0), seed=0)
     path = tmp_path_factory.mktemp("tiny_graph") / "tiny.igz"
     graph.save(path)
     return path

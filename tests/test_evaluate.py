@@ -19,7 +19,7 @@ def tiny(boxing_files, tmp_path_factory):
 
     d = tmp_path_factory.mktemp("eval")
     lib = build_library(boxing_files)
-    g, _ = build_graph(lib, BuildOptions(max_samples=6_000, n_initial=32, chunk_parents=128), seed=0, workers=1)
+    g, _ = build_graph(lib, BuildOptions(max_samples=6_000, n_initial=32, chunk_parents=128, seed_bouts=0), seed=0, workers=1)
     g.save(d / "tiny.igz")
     game = FightGame(lib, GameConfig())
     small = dict(num_envs=2, num_steps=16, episode_seconds=3.0, opponents={"self": 0.5, "random": 0.5})

@@ -16,7 +16,7 @@ from igraph_fight.graph import GraphFormatError, InteractionGraph
 from igraph_fight.sim import SimTables
 from motion_graph.errors import LibraryFormatError
 
-SMALL = BuildOptions(max_samples=12_000, n_initial=32, chunk_parents=128)
+SMALL = BuildOptions(max_samples=12_000, n_initial=32, chunk_parents=128, seed_bouts=0)
 
 
 @pytest.fixture(scope="module")
@@ -64,6 +64,21 @@ def test_initial_states_face_each_other_in_the_requested_share(tables):
     assert np.all(np.abs(explore.initial_samples(tables, o0, seed=3)[1][:, 1:]) <= math.pi)
     with pytest.raises(ValueError, match="initial_facing_share"):
         dataclasses.replace(SMALL, initial_facing_share=1.5).validate()
+
+
+def test_bout_seed_states_are_reward_free_deterministic_canonical_samples(lib, tables):
+    from igraph_fight.seeding import bout_seed_states
+    si, sf = bout_seed_states(lib, tables, 2, 10.0, seed=5)
+    si2, sf2 = bout_seed_states(lib, tables, 2, 10.0, seed=5)
+    assert len(si) > 10 and np.array_equal(si, si2) and np.array_equal(sf, sf2)
+    assert si.shape[1] == sim.N_SI and sf.shape[1] == sim.N_SF
+    assert np.all((si[:, sim.SI_MSELF] >= 0) & (si[:, sim.SI_MSELF] < lib.n_actions))
+    assert np.all(sf[:, sim.SF_R] >= 0) and np.all(np.abs(sf[:, 1:]) <= np.pi + 1e-9)
+    # they become roots of the sampler: a tiny build with them archives more distinct groups
+    o = dataclasses.replace(SMALL, max_samples=3000)
+    a0 = explore.explore(tables, o.explore_options(), 0)
+    a1 = explore.explore(tables, o.explore_options(), 0, extra_initial=(si, sf))
+    assert int(np.sum(a1.parent < 0)) > int(np.sum(a0.parent < 0))
 
 
 def test_sampler_does_not_depend_on_any_reward(built):
@@ -234,7 +249,7 @@ def test_cli_build_info_export(lib, tmp_path, capsys):
     lib.save(tmp_path / "lib.npz")
     out = tmp_path / "g.igz"
     args = ["build", "--library", str(tmp_path / "lib.npz"), "--out", str(out), "--max-samples", "3000",
-            "--n-initial", "16", "--seed", "3", "--json"]
+            "--n-initial", "16", "--seed-bouts", "4", "--seed", "3", "--json"]
     assert main(args) == 0
     rep = json.loads(capsys.readouterr().out)
     for key in ("n_states", "n_edges", "build_seconds", "peak_rss_mb", "dead_end_fraction", "snap_mean_cm",
@@ -251,7 +266,7 @@ def test_cli_build_info_export(lib, tmp_path, capsys):
     assert "truncated or corrupted" in capsys.readouterr().err
     # a leftover checkpoint of another build is refused with a clear message, --restart discards it
     ck = tmp_path / "g.igz.ckpt"
-    other = dataclasses.replace(BuildOptions(), max_samples=3000, n_initial=16, chunk_parents=64)
+    other = dataclasses.replace(BuildOptions(), max_samples=3000, n_initial=16, chunk_parents=64, seed_bouts=4)
 
     def interrupt(chunks: int, n: int) -> None:
         raise KeyboardInterrupt

@@ -667,6 +667,10 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
     ck = None
     if resume:
         ck = load_checkpoint(resume)
+        if "critic_hidden" not in ck["config"] and "value" in ck:
+            # written before the critic's size was a config field: read it off the stored weights
+            ck["config"]["critic_hidden"] = tuple(int(w.shape[0]) for k, w in ck["value"].items()
+                                                  if k.endswith(".weight"))[:-1]
         cfg = TrainConfig.from_dict({**ck["config"], "n_workers": cfg.n_workers, "envs_per_worker": cfg.envs_per_worker,
                                      "ckpt_every_min": cfg.ckpt_every_min, **(overrides or {})})
         log(f"resuming {resume}: {ck['budget']['samples']} samples so far; overrides {overrides or {}}")
@@ -694,11 +698,13 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
             learner.actor.load_state_dict(ck["policy"])
             if "value" in ck:
                 learner.critic.load_state_dict(ck["value"])
-            if "optimizer" in ck:
-                learner.opt.load_state_dict(ck["optimizer"])
-                learner.opt.param_groups[0]["lr"] = cfg.lr_critic
-            if "actor_optimizer" in ck:
-                learner.actor_opt.load_state_dict(ck["actor_optimizer"])
+            for key, opt in (("optimizer", learner.opt), ("actor_optimizer", learner.actor_opt)):
+                if key in ck:
+                    try:
+                        opt.load_state_dict(ck[key])
+                    except (ValueError, KeyError) as e:  # an older optimizer layout: start it afresh
+                        log(f"{resume}: {key} state not reused ({e}); it restarts")
+            learner.opt.param_groups[0]["lr"] = cfg.lr_critic
             learner.lr_actor = float(ck.get("lr_actor", cfg.lr_actor)) if "lr_actor" not in (overrides or {}) \
                 else cfg.lr_actor
             learner.norm.load(ck)

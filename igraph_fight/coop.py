@@ -30,7 +30,21 @@ from numba import njit
 
 from . import sim
 from .controller import _locate_p
-from .sim import _advance, _canonical, _next_decider, _relative, _root, _sample_world
+from .sim import _advance, _expand_one, _root, _sample_world
+
+
+@njit(cache=True, inline="always")
+def _midpoint_move(T, S, act, frm, r0, b):
+    """Move of the pair's midpoint since the event started, in the decider's pair frame at the
+    start (+Z towards the other, +X to its left; the other started at distance r0 and bearing b
+    from the decider at the origin, heading 0), and the distance between the roots now.
+    Returns (dx, dz, r) in metres."""
+    xa, za, _ = _root(T, S, act, frm, 0)
+    xb, zb, _ = _root(T, S, act, frm, 1)
+    dmx = 0.5 * (xa + xb) - 0.5 * r0 * np.sin(b)
+    dmz = 0.5 * (za + zb) - 0.5 * r0 * np.cos(b)
+    return (dmx * np.cos(b) - dmz * np.sin(b), dmx * np.sin(b) + dmz * np.cos(b),
+            np.sqrt((xb - xa) ** 2 + (zb - za) ** 2))
 
 
 @njit(cache=True, nogil=True)
@@ -42,25 +56,16 @@ def _mid_range(T, offsets, st_i, st_f, edge_action, out, lo, hi):
     mask = np.empty(2, dtype=np.int64)
     stats = np.empty(sim.N_STAT)
     for s in range(lo, hi):
-        r = st_f[s, 0]
-        b = st_f[s, 1]               # bearing of the other from the decider (heading 0): theta_self
-        x1 = r * np.sin(b)
-        z1 = r * np.cos(b)
-        ux, uz = np.sin(b), np.cos(b)   # pair frame +Z
-        lx, lz = np.cos(b), -np.sin(b)  # pair frame +X (left of the line)
         for e in range(offsets[s], offsets[s + 1]):
             _sample_world(T, st_i[s], st_f[s], edge_action[e], S, act, frm, mask)
             for k in range(sim.N_STAT):
                 stats[k] = 0.0
             _advance(T, S, act, frm, mask, stats)
-            xa, za, _ = _root(T, S, act, frm, 0)
-            xb, zb, _ = _root(T, S, act, frm, 1)
-            dmx = 0.5 * (xa + xb) - 0.5 * x1
-            dmz = 0.5 * (za + zb) - 0.5 * z1
-            out[e, 0] = dmx * lx + dmz * lz
-            out[e, 1] = dmx * ux + dmz * uz
+            mx, mz, r_end = _midpoint_move(T, S, act, frm, st_f[s, 0], st_f[s, 1])
+            out[e, 0] = mx
+            out[e, 1] = mz
             out[e, 2] = stats[sim.ST_FRAMES]
-            out[e, 3] = np.sqrt((xb - xa) ** 2 + (zb - za) ** 2)
+            out[e, 3] = r_end
 
 
 def midpoint_features(graph, tables, workers: int | None = 1) -> dict:
@@ -97,35 +102,21 @@ def _coop_lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, V_self,
     frm = np.empty(2, dtype=np.int64)
     mask = np.empty(2, dtype=np.int64)
     stats = np.empty(sim.N_STAT)
+    feat = np.empty(sim.N_FEAT)
     ci = np.empty(sim.N_SI, dtype=np.int64)
     cf = np.empty(sim.N_SF)
-    r0 = sf[0]
-    b = sf[1]
-    x1 = r0 * np.sin(b)
-    z1 = r0 * np.cos(b)
-    ux, uz = np.sin(b), np.cos(b)
-    lx, lz = np.cos(b), -np.sin(b)
     best_a = -1
     best_q = -np.inf
     for j in range(menu.shape[0]):
         a = menu[j]
-        _sample_world(T, si, sf, a, S, act, frm, mask)
-        for k in range(sim.N_STAT):
-            stats[k] = 0.0
-        _advance(T, S, act, frm, mask, stats)
-        d = _next_decider(T, act, frm)
-        if d < 0:
-            d = 0
-        _canonical(T, S, act, frm, mask, d, ci, cf)
-        xa, za, ha = _root(T, S, act, frm, 0)
-        xb, zb, hb = _root(T, S, act, frm, 1)
-        r, ts, to = _relative(xa, za, ha, xb, zb, hb)
-        dmx = 0.5 * (xa + xb) - 0.5 * x1
-        dmz = 0.5 * (za + zb) - 0.5 * z1
-        dur = max(stats[sim.ST_FRAMES] / rw[7], 1e-3)
-        vx = (dmx * lx + dmz * lz) / dur
-        vz = (dmx * ux + dmz * uz) / dur
-        w = (-rw[1] * (ts * ts + to * to) - rw[2] * (r - rw[0]) ** 2 - rw[4] * (stats[sim.ST_DMG0] + stats[sim.ST_DMG1])
+        d = _expand_one(T, si, sf, a, ci, cf, feat, S, act, frm, mask, stats)
+        mx, mz, _ = _midpoint_move(T, S, act, frm, sf[0], sf[1])
+        r, ts, to = feat[sim.FT_R], feat[sim.FT_TH_SELF], feat[sim.FT_TH_OTHER]
+        dur = max(feat[sim.FT_FRAMES] / rw[7], 1e-3)
+        vx = mx / dur
+        vz = mz / dur
+        w = (-rw[1] * (ts * ts + to * to) - rw[2] * (r - rw[0]) ** 2
+             - rw[4] * (feat[sim.FT_DMG_GIVEN] + feat[sim.FT_DMG_RECEIVED])
              - rw[3] * ((vx - rw[5]) ** 2 + (vz - rw[6]) ** 2))
         s, _, _, _ = _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, cf[0], cf[1], cf[2], ci[0], ci[1],
                                ci[2], ci[3])

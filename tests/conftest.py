@@ -62,6 +62,14 @@ def small_graph(boxing_library):
 
 
 @pytest.fixture(scope="session")
+def boxing_library_file(boxing_library, tmp_path_factory) -> str:
+    """The session's boxing library saved as an .npz (what the tracker's workers load)."""
+    path = tmp_path_factory.mktemp("lib") / "boxing_library.npz"
+    boxing_library.save(path)
+    return str(path)
+
+
+@pytest.fixture(scope="session")
 def boxing_library(boxing_files):
     """The action library of the two CMU boxing takes (motion_graph.build_library, about 6 s)."""
     from motion_graph.library import build_library

@@ -20,9 +20,8 @@ SMALL = BuildOptions(max_samples=12_000, n_initial=32, chunk_parents=128, seed_b
 
 
 @pytest.fixture(scope="module")
-def lib(boxing_files):
-    from motion_graph.library import build_library
-    return build_library(boxing_files)
+def lib(boxing_library):
+    return boxing_library
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,8 @@ from motion_graph.classify import KINDS
 
 
 @pytest.fixture(scope="module")
-def lib(boxing_files):
-    from motion_graph.library import build_library
-    return build_library(boxing_files)
+def lib(boxing_library):
+    return boxing_library
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-from functools import lru_cache
 
 import numpy as np
 import pytest
@@ -17,22 +16,9 @@ REQUIRED = ("completion_rate", "mean_time_to_fall_s", "mpjpe_cm", "root_drift_cm
 TIMING = ("realtime_factor", "wall_s")
 
 
-@lru_cache(maxsize=None)
-def _library_path(files: tuple[str, ...], tmp: str) -> str:
-    from motion_graph.library import build_library
-    path = f"{tmp}/boxing_library.npz"
-    build_library(list(files)).save(path)
-    return path
-
-
-@pytest.fixture(scope="module")
-def library_file(boxing_files, tmp_path_factory):
-    return _library_path(tuple(str(f) for f in boxing_files), str(tmp_path_factory.mktemp("lib")))
-
-
-def test_pd_baseline_reproducible_with_fixed_seed(library_file):
+def test_pd_baseline_reproducible_with_fixed_seed(boxing_library_file):
     from motion_graph.library import load_library
-    src = LibraryWalks(load_library(library_file))
+    src = LibraryWalks(load_library(boxing_library_file))
     a = evaluate_walks(make_setup(src), PDController(), n_walks=3, n_actions=4, seed=11)
     b = evaluate_walks(make_setup(src), PDController(), n_walks=3, n_actions=4, seed=11)
     strip = lambda m: {k: v for k, v in m.items() if k not in TIMING}  # noqa: E731
@@ -54,12 +40,12 @@ def test_clip_windows_source(boxing_files):
     assert motion.fps == 30.0 and motion.n_frames == 91
 
 
-def test_cli_eval_json(library_file, capsys):
+def test_cli_eval_json(boxing_library_file, capsys):
     from igraph_fight.cli import main
-    rc = main(["tracker", "eval", "--library", library_file, "--walks", "2", "--actions", "3", "--seed", "4", "--json"])
+    rc = main(["tracker", "eval", "--library", boxing_library_file, "--walks", "2", "--actions", "3", "--seed", "4", "--json"])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     for k in REQUIRED:
         assert k in out
     assert out["controller"] == "pd" and out["n_walks"] == 2 and out["n_actions"] == 3
-    assert main(["tracker", "eval", "--library", library_file, "--walks", "1", "--controller", "nope"]) == 2
+    assert main(["tracker", "eval", "--library", boxing_library_file, "--walks", "1", "--controller", "nope"]) == 2

@@ -7,7 +7,6 @@ tracker/MEASUREMENTS.md)."""
 from __future__ import annotations
 
 from dataclasses import replace
-from functools import lru_cache
 
 import numpy as np
 import pytest
@@ -21,34 +20,21 @@ pytestmark = pytest.mark.realdata
 torch = pytest.importorskip("torch")
 
 
-@lru_cache(maxsize=None)
-def _library_path(files: tuple[str, ...], tmp: str) -> str:
-    from motion_graph.library import build_library
-    path = f"{tmp}/boxing_library.npz"
-    build_library(list(files)).save(path)
-    return path
-
-
 @pytest.fixture(scope="module")
-def library_file(boxing_files, tmp_path_factory):
-    return _library_path(tuple(str(f) for f in boxing_files), str(tmp_path_factory.mktemp("lib")))
-
-
-@pytest.fixture(scope="module")
-def source(library_file):
+def source(boxing_library_file):
     from motion_graph.library import load_library
-    return LibraryWalks(load_library(library_file))
+    return LibraryWalks(load_library(boxing_library_file))
 
 
 @pytest.fixture(scope="module")
-def tiny_checkpoint(library_file, tmp_path_factory):
+def tiny_checkpoint(boxing_library_file, tmp_path_factory):
     """One PPO iteration on real walks (fixed seed): a real, loadable checkpoint of the trainer."""
     from tracker.train import TrainConfig, train
     cfg = TrainConfig(seed=0, n_workers=1, envs_per_worker=4, horizon=32, walks_per_worker=2, walk_actions=3,
                       refresh_walks=0, minibatch=128, hidden=(64, 64), critic_hidden=(64, 64),
                       init_noise=0.0, eval_every_min=0)
     out = tmp_path_factory.mktemp("ck") / "tiny.pt"
-    train(cfg, library_file, 10.0, str(out), progress=False, max_iterations=1, log=lambda *a: None)
+    train(cfg, boxing_library_file, 10.0, str(out), progress=False, max_iterations=1, log=lambda *a: None)
     return cfg, out
 
 
@@ -82,7 +68,7 @@ def test_policy_runs_per_fighter_in_a_two_fighter_scene(source, tiny_checkpoint)
     assert np.all(np.isfinite(env.data.qpos))
 
 
-def test_training_checkpoint_resumes_and_accumulates_budget(library_file, tiny_checkpoint, tmp_path):
+def test_training_checkpoint_resumes_and_accumulates_budget(boxing_library_file, tiny_checkpoint, tmp_path):
     """Fixed seed, real environment and training loop (worker process, GAE, PPO, checkpoint,
     resume): the resumed run starts from the stored weights and adds its samples, iterations and
     CPU time to the budget; the history and the learning-curve plot grow with it."""
@@ -94,7 +80,7 @@ def test_training_checkpoint_resumes_and_accumulates_budget(library_file, tiny_c
     shutil.copy(first, out)
     ck0 = load_checkpoint(out)
     assert ck0["budget"]["runs"] == 1 and ck0["budget"]["iterations"] == 1
-    train(cfg, library_file, 10.0, str(out), resume=str(out), progress=False, max_iterations=2, log=lambda *a: None)
+    train(cfg, boxing_library_file, 10.0, str(out), resume=str(out), progress=False, max_iterations=2, log=lambda *a: None)
     ck = load_checkpoint(out)
     assert ck["budget"]["runs"] == 2 and ck["budget"]["iterations"] == 3
     assert ck["budget"]["samples"] == 3 * 4 * 32 and ck["budget"]["cpu_hours"] > ck0["budget"]["cpu_hours"]

@@ -23,12 +23,6 @@ def _clip(path: str, seconds: float = 6.0):
     return m.slice(0, min(m.n_frames, int(seconds * m.fps)))
 
 
-@lru_cache(maxsize=None)
-def _library(files: tuple[str, ...]):
-    from motion_graph.library import build_library
-    return build_library(list(files))
-
-
 @pytest.mark.parametrize("rel", ["cmu/boxing/13_18.bvh", "cmu/asf_amc/135_06.amc",
                                  "bandai_namco/dataset-1_kick_normal_001.bvh"])
 @pytest.mark.parametrize("joint_type", ["ball", "hinge3"])
@@ -42,8 +36,8 @@ def test_clip_reference_matches_kinematics_within_1cm(mocap_root, rel, joint_typ
     assert err.max() < 0.01
 
 
-def test_library_walk_reference_matches_within_1cm_and_reports_penetration(boxing_files):
-    lib = _library(tuple(str(f) for f in boxing_files))
+def test_library_walk_reference_matches_within_1cm_and_reports_penetration(boxing_library):
+    lib = boxing_library
     from tracker.walks import LibraryWalks
     src = LibraryWalks(lib)
     spec = fighter_spec(src.skeleton, src.calibration_motions())

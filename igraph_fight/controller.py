@@ -370,12 +370,17 @@ def _choose(s, best_me, q_me, offsets, edge_action, legal_row):
     return -1, -1
 
 
-# The kernels take the controller's static arrays as few arguments (numba's dispatch costs
-# about 0.1-0.2 us per argument, a sizeable part of a table decision): ``pi`` int64 = a header
+# The kernels take the controller's static arrays as three flat arrays (numba's dispatch costs
+# about 0.1 us per array argument, a sizeable part of a table decision): ``pi`` int64 = a header
 # of part offsets, then the parts named in _INT_PARTS; ``pf`` float64 = (inv_sr2, inv_st2,
-# tol_r, tol_theta, cell_w); IX = (rows0, ctab, xf, xi, strt).
+# tol_r, tol_theta, cell_w), then rowsw, rowsk, xf, strt flattened; ``pc`` = ctabw, ctabk
+# flattened. _views rebuilds the index arrays from them (reshapes of slices: no copy).
 _INT_PARTS = ("ukeys", "nkeys", "bst2", "nextset_of", "key_args", "menu_off", "menu_ids", "offsets",
-              "edge_action", "kinds", "scalars", "bst3")  # scalars = (f0, number of frame blocks, ncell)
+              "edge_action", "kinds", "scalars", "bst3", "xi", "legal", "dims")
+# scalars = (f0, number of frame blocks, ncell); legal = (A, A) flattened; dims = (rows of rowsw,
+# rows of rowsk, S, slots of ctabw, slots of ctabk, ncell + 1, A, then the pf offsets of rowsw,
+# rowsk, xf, strt)
+_P_SCALARS, _P_BST3, _P_XI, _P_LEGAL, _P_DIMS = 10, 11, 12, 13, 14
 
 
 def _pack_ints(parts: dict) -> np.ndarray:
@@ -385,21 +390,59 @@ def _pack_ints(parts: dict) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([off.astype(np.int64), *arrs]), dtype=np.int64)
 
 
+def _pack_index(ix: tuple, ix_parts: dict, scalars: list, other_ints: dict, legal: np.ndarray,
+                pf_head: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(pi, pf, pc) of the notes above from _build_index's output and the controller's tables."""
+    rowsw, ctabw, rowsk, ctabk, xf, xi, strt = ix
+    fparts = [np.asarray(pf_head, dtype=np.float64), rowsw.ravel(), rowsk.ravel(), xf.ravel(), strt.ravel()]
+    foff = np.cumsum([0] + [len(x) for x in fparts])[1:-1]
+    dims = [len(rowsw), len(rowsk), strt.shape[0], ctabw.shape[0], ctabk.shape[0], ctabw.shape[1],
+            legal.shape[0], *foff]
+    pi = _pack_ints(dict(ix_parts, **other_ints, scalars=scalars, xi=xi, legal=legal.astype(np.int64), dims=dims))
+    pf = np.ascontiguousarray(np.concatenate(fparts), dtype=np.float64)
+    ct = np.int32 if ctabw.dtype == np.int32 and ctabk.dtype == np.int32 else np.int64
+    pc = np.ascontiguousarray(np.concatenate([ctabw.ravel(), ctabk.ravel()]), dtype=ct)
+    return pi, pf, pc
+
+
 @njit(cache=True, inline="always")
 def _part(pi, i):
     return pi[pi[i]:pi[i + 1]]
 
 
+@njit(cache=True, inline="always")
+def _views(pi, pf, pc):
+    """(rowsw, ctabw, rowsk, ctabk, xf, xi, strt) as views of the packed arrays."""
+    d = _part(pi, _P_DIMS)
+    nw, nk, S, sw, sk, nc = d[0], d[1], d[2], d[3], d[4], d[5]
+    rowsw = pf[d[7]:d[7] + 4 * nw].reshape((nw, 4))
+    rowsk = pf[d[8]:d[8] + 4 * nk].reshape((nk, 4))
+    xf = pf[d[9]:d[9] + 6 * S].reshape((6, S))
+    strt = pf[d[10]:d[10] + 3 * S].reshape((S, 3))
+    ctabw = pc[:sw * nc].reshape((sw, nc))
+    ctabk = pc[sw * nc:sw * nc + sk * nc].reshape((sk, nc))
+    xi = _part(pi, _P_XI).reshape((3, S))
+    return rowsw, ctabw, rowsk, ctabk, xf, xi, strt
+
+
+@njit(cache=True, inline="always")
+def _legal_row(pi, m):
+    """Legal flags (A,) of the actions after action m."""
+    A = _part(pi, _P_DIMS)[6]
+    return _part(pi, _P_LEGAL)[m * A:(m + 1) * A]
+
+
 @njit(cache=True)
-def _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, r, ts, to, m_self, m_other, f_other, mask):
+def _locate_p(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask):
     """(state, squared normalised distance, level, off_graph) of a live state."""
-    sc = _part(pi, 10)
+    rowsw, ctabw, rowsk, ctabk, xf, xi, strt = _views(pi, pf, pc)
+    sc = _part(pi, _P_SCALARS)
     nextset_of = _part(pi, 3)
     key_args = _part(pi, 4)
     ns = nextset_of[m_self]
     key = (ns * key_args[0] + m_other) * key_args[1] + mask
     s, d2, level = _nearest(rowsw, ctabw, rowsk, ctabk, _part(pi, 0), sc[1], sc[2], pf[4], xf, xi, _part(pi, 1),
-                            _part(pi, 2), _part(pi, 11), key, ns, f_other, sc[0], r, ts, to, pf[0], pf[1])
+                            _part(pi, 2), _part(pi, _P_BST3), key, ns, f_other, sc[0], r, ts, to, pf[0], pf[1])
     off = level > 0
     if s >= 0 and level == 0:
         off = (abs(strt[s, 0] - r) > pf[2] or abs(_wrap(strt[s, 1] - ts)) > pf[3]
@@ -408,26 +451,24 @@ def _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, r, ts, to, m_sel
 
 
 @njit(cache=True)
-def _decide(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, r, ts, to, m_self, m_other,
-            f_other, mask):
+def _decide(pi, pf, pc, best_me, q_me, r, ts, to, m_self, m_other, f_other, mask):
     """Table decision: (action, state, normalised distance, off_graph, edge)."""
-    s, d2, level, off = _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, r, ts, to, m_self, m_other,
-                                  f_other, mask)
-    e, a = _choose(s, best_me, q_me, _part(pi, 7), _part(pi, 8), legal[m_self])
+    s, d2, level, off = _locate_p(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask)
+    e, a = _choose(s, best_me, q_me, _part(pi, 7), _part(pi, 8), _legal_row(pi, m_self))
     if a < 0:
         a = _part(pi, 6)[_part(pi, 5)[m_self]]
     return a, s, np.sqrt(d2), off, e
 
 
 @njit(cache=True)
-def _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self,
-               m_other, f_other, mask):
+def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self, m_other, f_other, mask):
     """Off-graph decision: simulate every legal action once from the live state (sim._expand_one)
     and score it by its Eq. 4 reward for the decider (the W_me of planner.rewards) plus gamma
     times the policy's depth-(D-1) value of the graph state nearest to where it lands.
     rw = (d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second, distance is "mean",
     gamma, fps). Returns (best action, its score); (-1, 0) without legal actions."""
-    sc = _part(pi, 10)
+    rowsw, ctabw, rowsk, ctabk, xf, xi, _ = _views(pi, pf, pc)
+    sc = _part(pi, _P_SCALARS)
     nextset_of = _part(pi, 3)
     key_args = _part(pi, 4)
     menu_off = _part(pi, 5)
@@ -476,7 +517,7 @@ def _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_n
         ns = nextset_of[ci[0]]
         key = (ns * key_args[0] + ci[1]) * key_args[1] + ci[3]
         s, _, _ = _nearest(rowsw, ctabw, rowsk, ctabk, _part(pi, 0), sc[1], sc[2], pf[4], xf, xi, _part(pi, 1),
-                           _part(pi, 2), _part(pi, 11), key, ns, ci[2], sc[0], cf[0], cf[1], cf[2], pf[0], pf[1])
+                           _part(pi, 2), _part(pi, _P_BST3), key, ns, ci[2], sc[0], cf[0], cf[1], cf[2], pf[0], pf[1])
         v = 0.0
         if s >= 0:
             v = np.float64(V_opp_next[s]) if swap else np.float64(V_me_next[s])
@@ -487,14 +528,14 @@ def _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_n
     return best_a, best_q
 
 
-def _act_batch_py(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, V_me_next, V_opp_next,
-                  pref, rw, lookahead, r, ts, to, m_self, m_other, f_other, mask, out, dist):
+def _act_batch_py(T, pi, pf, pc, best_me, q_me, V_me_next, V_opp_next, pref, rw, lookahead, r, ts, to, m_self,
+                  m_other, f_other, mask, out, dist):
     for i in prange(len(r)):
-        a, s, d, off, e = _decide(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, legal, best_me, q_me, r[i], ts[i],
-                                  to[i], m_self[i], m_other[i], f_other[i], mask[i])
+        a, s, d, off, e = _decide(pi, pf, pc, best_me, q_me, r[i], ts[i], to[i], m_self[i], m_other[i], f_other[i],
+                                  mask[i])
         if lookahead and off:
-            la, _ = _lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, V_me_next, V_opp_next, pref, rw, r[i],
-                               ts[i], to[i], m_self[i], m_other[i], f_other[i], mask[i])
+            la, _ = _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r[i], ts[i], to[i], m_self[i],
+                               m_other[i], f_other[i], mask[i])
             if la >= 0:
                 a = la
                 e = -1
@@ -670,7 +711,7 @@ class NPCController:
         self._nextset_of = _nextset_ids(library)
         mask_mod = int(a["state_mask_other"].max()) + 2 if len(a["state_mask_other"]) else 2
         self._key_args = np.array([A + 1, mask_mod], dtype=np.int64)
-        self._ix, ix_parts, cell_w = _build_index(a, A, mask_mod, self.f0)
+        ix, ix_parts, cell_w = _build_index(a, A, mask_mod, self.f0)
         self._offsets = a["state_offsets"].astype(np.int64)
         self._edge_action = a["edge_action"].astype(np.int64)
         self._target = a["edge_target"].astype(np.int64)
@@ -687,16 +728,18 @@ class NPCController:
         self.tables = SimTables.from_library(library, SimParams(**sim_opts) if sim_opts else SimParams())
         self._T = self.tables.kernel_tuple()
         self._kinds = np.asarray(self.tables.kinds, dtype=np.int64)
-        self._pi = _pack_ints(dict(ukeys=ix_parts["ukeys"], nkeys=ix_parts["nkeys"], bst2=ix_parts["bst2"],
-                                   bst3=ix_parts["bst3"],
-                                   nextset_of=self._nextset_of, key_args=self._key_args, menu_off=self._menu_off,
-                                   menu_ids=self._menu_ids, offsets=self._offsets, edge_action=self._edge_action,
-                                   kinds=self._kinds, scalars=[self.f0, ix_parts["fm"], ix_parts["ncell"]]))
-        self._pf = np.array([self._inv_sr2, self._inv_st2, self.tol_r, self.tol_theta, cell_w], dtype=np.float64)
+        self._pi, self._pf, self._pc = _pack_index(
+            ix, {k: ix_parts[k] for k in ("ukeys", "nkeys", "bst2", "bst3")},
+            [self.f0, ix_parts["fm"], ix_parts["ncell"]],
+            dict(nextset_of=self._nextset_of, key_args=self._key_args, menu_off=self._menu_off,
+                 menu_ids=self._menu_ids, offsets=self._offsets, edge_action=self._edge_action, kinds=self._kinds),
+            legal, [self._inv_sr2, self._inv_st2, self.tol_r, self.tol_theta, cell_w])
         self.stochastic = stochastic
         self.temperature = float(temperature)
         self.usage_penalty = float(usage_penalty)
-        self._usage = np.zeros(len(self._edge_action), dtype=np.float64)
+        # edge -> times chosen, kept only when the usage penalty needs it (a dense per-edge array
+        # was 50 MB of lazily zeroed pages whose first touches cost up to 0.3 ms a decision)
+        self._usage: dict[int, int] = {}
         self._rng = np.random.default_rng(seed)
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="npc-policy")
         self._lock = threading.Lock()
@@ -770,7 +813,7 @@ class NPCController:
     # ----- decisions ------------------------------------------------------------------------
     def _lookahead(self, table: _Table, obs: Observation) -> tuple[int, float]:
         """One exact simulated event per legal action + the graph value where it lands."""
-        a, q = _lookahead(self._T, self._pi, self._pf, *self._ix[:6], *table.la, float(obs.r), float(obs.theta_self),
+        a, q = _lookahead(self._T, self._pi, self._pf, self._pc, *table.la, float(obs.r), float(obs.theta_self),
                           float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
                           int(obs.mask_other))
         return int(a), float(q)
@@ -778,8 +821,7 @@ class NPCController:
     def act(self, obs: Observation) -> Decision:
         """The action for one live state (see the module docstring)."""
         table = self._table  # one read: a consistent snapshot
-        a, s, d, off, e = _decide(self._pi, self._pf, *self._ix, self._legal, table.best_me, table.q_me,
-                                  float(obs.r), float(obs.theta_self), float(obs.theta_other), int(obs.m_self),
+        a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_me, table.q_me, float(obs.r), float(obs.theta_self), float(obs.theta_other), int(obs.m_self),
                                   int(obs.m_other), int(obs.f_other), int(obs.mask_other))
         if self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
             la, _ = self._lookahead(table, obs)
@@ -789,14 +831,14 @@ class NPCController:
             re = self._roulette(table, s, int(obs.m_self))
             if re >= 0:
                 e, a = re, int(self._edge_action[re])
-        if e >= 0:
-            self._usage[e] += 1
+        if e >= 0 and self.usage_penalty > 0.0:
+            self._usage[e] = self._usage.get(e, 0) + 1
         return Decision(a, s, d, off, e)
 
     def locate(self, obs: Observation) -> tuple[int, float, bool]:
         """The graph state a live state maps to, as act() finds it: (state, normalised distance,
         off_graph). No decision, no lookahead; state -1 only for an empty graph."""
-        s, d2, _, off = _locate_p(self._pi, self._pf, *self._ix, float(obs.r), float(obs.theta_self),
+        s, d2, _, off = _locate_p(self._pi, self._pf, self._pc, float(obs.r), float(obs.theta_self),
                                   float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
                                   int(obs.mask_other))
         return int(s), float(np.sqrt(d2)), bool(off)
@@ -809,7 +851,8 @@ class NPCController:
             return -1
         q = table.q_me[lo:hi].astype(np.float64)[legal]
         idx = np.arange(lo, hi)[legal]
-        p = roulette_probabilities(q, self.temperature, "softmax", self._usage[idx], self.usage_penalty)
+        used = np.array([self._usage.get(int(i), 0) for i in idx], dtype=np.float64)
+        p = roulette_probabilities(q, self.temperature, "softmax", used, self.usage_penalty)
         return int(idx[self._rng.choice(len(idx), p=p)])
 
     def act_batch(self, r, theta_self, theta_other, m_self, m_other, f_other, mask_other=None,
@@ -824,8 +867,7 @@ class NPCController:
         dist = np.empty(n)
         table = self._table
         kernel = _act_batch if n >= PARALLEL_MIN else _act_batch_serial
-        kernel(self._T, self._pi, self._pf, *self._ix, self._legal, table.best_me, table.q_me, *table.la,
-                   bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
+        kernel(self._T, self._pi, self._pf, self._pc, table.best_me, table.q_me, *table.la, bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
                    np.asarray(theta_self, dtype=np.float64), np.asarray(theta_other, dtype=np.float64),
                    np.asarray(m_self, dtype=np.int64), np.asarray(m_other, dtype=np.int64),
                    np.asarray(f_other, dtype=np.int64), mask, out, dist)

@@ -91,7 +91,7 @@ def midpoint_features(graph, tables, workers: int | None = 1) -> dict:
 
 
 @njit(cache=True)
-def _coop_lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, V_self, V_other, gamma, rw, menu, si, sf):
+def _coop_lookahead(T, pi, pf, pc, V_self, V_other, gamma, rw, menu, si, sf):
     """Off-graph cooperative decision: simulate every legal action once from the live state and
     score it by the cooperative reward of that event (planner.cooperative_rewards' formula) plus
     gamma times the value of the graph state nearest to where it lands (V_other when the other
@@ -118,8 +118,7 @@ def _coop_lookahead(T, pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, V_self,
         w = (-rw[1] * (ts * ts + to * to) - rw[2] * (r - rw[0]) ** 2
              - rw[4] * (feat[sim.FT_DMG_GIVEN] + feat[sim.FT_DMG_RECEIVED])
              - rw[3] * ((vx - rw[5]) ** 2 + (vz - rw[6]) ** 2))
-        s, _, _, _ = _locate_p(pi, pf, rowsw, ctabw, rowsk, ctabk, xf, xi, strt, cf[0], cf[1], cf[2], ci[0], ci[1],
-                               ci[2], ci[3])
+        s, _, _, _ = _locate_p(pi, pf, pc, cf[0], cf[1], cf[2], ci[0], ci[1], ci[2], ci[3])
         v = 0.0
         if s >= 0:
             v = V_other[s] if d == 1 else V_self[s]
@@ -243,7 +242,7 @@ class CoopAgent:
         if off and self.lookahead:
             si, sf = to_sample(state.game.tables, state.world, player)
             V_self, V_other = (p.V_a, p.V_b) if self.role == 0 else (p.V_b, p.V_a)
-            a, _ = _coop_lookahead(c._T, c._pi, c._pf, *c._ix, V_self, V_other, p.gamma, self._weights(),
+            a, _ = _coop_lookahead(c._T, c._pi, c._pf, c._pc, V_self, V_other, p.gamma, self._weights(),
                                 np.ascontiguousarray(legal, dtype=np.int64), si.astype(np.int64), sf.astype(np.float64))
             if a >= 0:
                 return int(a)

@@ -244,13 +244,14 @@ def _advance(T, S, act, frm, mask, stats):
     c = np.empty(2)
     s = np.empty(2)
     steps = 0
+    for i in range(2):  # headings do not change within an event (the push moves x, z only)
+        c[i] = np.cos(S[i, 2])
+        s[i] = np.sin(S[i, 2])
     while frm[0] < n_frames[act[0]] - 1 and frm[1] < n_frames[act[1]] - 1 and steps < max_frames:
         steps += 1
         for i in range(2):
             frm[i] += 1
             g = offs[act[i]] + frm[i]
-            c[i] = np.cos(S[i, 2])
-            s[i] = np.sin(S[i, 2])
             lx = path[g, 0]
             lz = path[g, 1]
             px[i] = c[i] * lx + s[i] * lz + S[i, 0]

@@ -23,6 +23,7 @@ from motion_graph.atomic import atomic_write_text
 
 from . import cluster, edges, explore, sim
 from .graph import FORMAT, VERSION, InteractionGraph, library_fingerprint, package_version
+from .seeding import SEED_PAIRINGS
 from .sim import SI_FOTHER, SI_MASK, SI_MOTHER, SI_MSELF, SimParams, SimTables
 
 
@@ -39,10 +40,12 @@ class BuildOptions:
     each other within 30 degrees (initial_facing_*): with uniform angles only ~3% of the close
     states of the graph faced each other and the game-tree fighter's states were covered 34%
     (61% with facing starts, 4-bout evaluation of 2026-11-26). The sampler also starts from the
-    decision states of 512 reward-free 30 s bouts (human proxy vs random; seeding.py): 20-bout
-    evaluation, seed 0: coverage 46% -> 72%, states without a compatible group 21% -> 0.1%, and
-    the IG fighter's score grows with depth against all five baselines (128 bouts: 63%; 1024:
-    76% with no better scores and a 50% longer build).
+    decision states of 512 reward-free 30 s bouts (seeding.py): 20-bout evaluation, seed 0, with
+    human proxy vs random bouts: coverage 46% -> 72%, states without a compatible group 21% ->
+    0.1%, and the IG fighter's score grows with depth against all five baselines (128 bouts: 63%;
+    1024: 76% with no better scores and a 50% longer build); with human proxy vs human proxy
+    bouts (seed_pairing "human", the default since): 86% (half of each: 82%; 1024 bouts: 87% in a
+    60% longer build), scores against the game-tree fighters unchanged within their intervals.
 
     tol_*: snapping tolerance of the clustering (bounds a sample's move to its state).
     link_tol_*: tolerance of an edge's landing around its target state (also the sampler's C).
@@ -59,6 +62,7 @@ class BuildOptions:
     initial_facing_deg: float = 30.0
     seed_bouts: int = 512
     seed_bout_seconds: float = 30.0
+    seed_pairing: str = "human"
     expand_fraction: float = 0.3
     f0: int = 10
     tol_r_m: float = 0.05
@@ -88,6 +92,8 @@ class BuildOptions:
         s = d.pop("sim", None)
         known = {f.name for f in fields(cls)}
         kw = {k: v for k, v in d.items() if k in known}
+        if "seed_bouts" in d and "seed_pairing" not in d:
+            kw["seed_pairing"] = "random"  # files from before the option: their seed bouts were vs random
         if s is not None:
             kw["sim"] = SimParams(**s)
         return cls(**kw)
@@ -111,6 +117,8 @@ class BuildOptions:
             raise ValueError("max_samples, n_initial, f0 and chunk_parents must be positive")
         if self.seed_bouts < 0 or self.seed_bout_seconds <= 0:
             raise ValueError("seed_bouts must be >= 0 and seed_bout_seconds positive")
+        if self.seed_pairing not in SEED_PAIRINGS:
+            raise ValueError(f"seed_pairing must be one of {', '.join(SEED_PAIRINGS)}, not {self.seed_pairing!r}")
         if not 0 <= self.initial_facing_share <= 1 or not 0 < self.initial_facing_deg <= 180:
             raise ValueError("initial_facing_share must be in [0, 1] and initial_facing_deg in (0, 180]")
         if not 0 < self.expand_fraction <= 1:
@@ -170,7 +178,8 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
     extra = None
     if options.seed_bouts > 0 and not resumed:
         from .seeding import bout_seed_states
-        extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed)
+        extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed,
+                                 options.seed_pairing)
     arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, on_chunk, workers,
                           extra_initial=extra)
     timings["explore_s"] = time.perf_counter() - t

@@ -54,7 +54,9 @@ def register(sub) -> None:
                         "each other (default 0.75,30; the rest take any angle)")
     p.add_argument("--seed-bouts", type=int, default=None, metavar="N",
                    help="also start the sampler from the decision states of N reward-free bouts "
-                        "(human proxy vs random, 30 s each; igraph_fight.seeding; default 512)")
+                        "(30 s each; igraph_fight.seeding; default 512)")
+    p.add_argument("--seed-pairing", choices=("human", "random"), default=None,
+                   help="seed bouts between two human proxies (default) or a human proxy and a random fighter")
     p.add_argument("--next-threshold", type=float, default=None,
                    help="with --mocap: Next(a) pose threshold of the library (m, default 0.20)")
     p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
@@ -102,6 +104,8 @@ def _options(args: argparse.Namespace):
         kw["n_initial"] = args.n_initial
     if args.seed_bouts is not None:
         kw["seed_bouts"] = args.seed_bouts
+    if args.seed_pairing is not None:
+        kw["seed_pairing"] = args.seed_pairing
     if args.initial_facing is not None:
         kw["initial_facing_share"], kw["initial_facing_deg"] = float(args.initial_facing[0]), float(args.initial_facing[1])
     if args.no_prune:

@@ -89,7 +89,7 @@ class _Table:
     """An immutable policy snapshot: what act() reads."""
 
     policy: Policy
-    best_me: np.ndarray      # (S,) edge
+    best_ea: np.ndarray      # (S, 2) int64: best edge (-1: none) and its action
     q_me: np.ndarray         # (E,) float32 edge score for the controlled fighter deciding
     style: str
     depth: int
@@ -352,13 +352,14 @@ def _nearest(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, n
 
 
 @njit(cache=True)
-def _choose(s, best_me, q_me, offsets, edge_action, legal_row):
-    """Best edge of s if its action is legal, else the best-scoring legal edge; (-1, -1) if none."""
+def _choose(s, best_ea, q_me, offsets, edge_action, legal_row):
+    """Best edge of s if its action is legal, else the best-scoring legal edge; (-1, -1) if none.
+    best_ea (S, 2) = (best edge, its action) per state: one cache line for the usual answer."""
     if s < 0:
         return -1, -1
-    e = best_me[s]
-    if e >= 0 and legal_row[edge_action[e]]:
-        return e, edge_action[e]
+    e = best_ea[s, 0]
+    if e >= 0 and legal_row[best_ea[s, 1]]:
+        return e, best_ea[s, 1]
     be = -1
     bq = -np.inf
     for k in range(offsets[s], offsets[s + 1]):
@@ -451,10 +452,10 @@ def _locate_p(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask):
 
 
 @njit(cache=True)
-def _decide(pi, pf, pc, best_me, q_me, r, ts, to, m_self, m_other, f_other, mask):
+def _decide(pi, pf, pc, best_ea, q_me, r, ts, to, m_self, m_other, f_other, mask):
     """Table decision: (action, state, normalised distance, off_graph, edge)."""
     s, d2, level, off = _locate_p(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask)
-    e, a = _choose(s, best_me, q_me, _part(pi, 7), _part(pi, 8), _legal_row(pi, m_self))
+    e, a = _choose(s, best_ea, q_me, _part(pi, 7), _part(pi, 8), _legal_row(pi, m_self))
     if a < 0:
         a = _part(pi, 6)[_part(pi, 5)[m_self]]
     return a, s, np.sqrt(d2), off, e
@@ -528,10 +529,10 @@ def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self
     return best_a, best_q
 
 
-def _act_batch_py(T, pi, pf, pc, best_me, q_me, V_me_next, V_opp_next, pref, rw, lookahead, r, ts, to, m_self,
+def _act_batch_py(T, pi, pf, pc, best_ea, q_me, V_me_next, V_opp_next, pref, rw, lookahead, r, ts, to, m_self,
                   m_other, f_other, mask, out, dist):
     for i in prange(len(r)):
-        a, s, d, off, e = _decide(pi, pf, pc, best_me, q_me, r[i], ts[i], to[i], m_self[i], m_other[i], f_other[i],
+        a, s, d, off, e = _decide(pi, pf, pc, best_ea, q_me, r[i], ts[i], to[i], m_self[i], m_other[i], f_other[i],
                                   mask[i])
         if lookahead and off:
             la, _ = _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r[i], ts[i], to[i], m_self[i],
@@ -774,7 +775,10 @@ class NPCController:
                        float(self.tables.fps)], dtype=np.float64)
         la = (np.ascontiguousarray(pol.V_me_next), np.ascontiguousarray(pol.V_opp_next),
               kind_preferences(style, [str(k) for k in self._arrays["kinds_table"]]), rw)
-        return _Table(pol, pol.best_me.astype(np.int64), q, style.name, depth, v, style, la)
+        be = pol.best_me.astype(np.int64)
+        best_ea = np.ascontiguousarray(np.stack([be, np.where(be >= 0, self._edge_action[np.maximum(be, 0)], -1)],
+                                                axis=1))
+        return _Table(pol, best_ea, q, style.name, depth, v, style, la)
 
     @property
     def style(self) -> str:
@@ -821,8 +825,9 @@ class NPCController:
     def act(self, obs: Observation) -> Decision:
         """The action for one live state (see the module docstring)."""
         table = self._table  # one read: a consistent snapshot
-        a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_me, table.q_me, float(obs.r), float(obs.theta_self), float(obs.theta_other), int(obs.m_self),
-                                  int(obs.m_other), int(obs.f_other), int(obs.mask_other))
+        a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_ea, table.q_me, float(obs.r),
+                                  float(obs.theta_self), float(obs.theta_other), int(obs.m_self), int(obs.m_other),
+                                  int(obs.f_other), int(obs.mask_other))
         if self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
             la, _ = self._lookahead(table, obs)
             if la >= 0:
@@ -867,10 +872,11 @@ class NPCController:
         dist = np.empty(n)
         table = self._table
         kernel = _act_batch if n >= PARALLEL_MIN else _act_batch_serial
-        kernel(self._T, self._pi, self._pf, self._pc, table.best_me, table.q_me, *table.la, bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
-                   np.asarray(theta_self, dtype=np.float64), np.asarray(theta_other, dtype=np.float64),
-                   np.asarray(m_self, dtype=np.int64), np.asarray(m_other, dtype=np.int64),
-                   np.asarray(f_other, dtype=np.int64), mask, out, dist)
+        kernel(self._T, self._pi, self._pf, self._pc, table.best_ea, table.q_me, *table.la,
+               bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
+               np.asarray(theta_self, dtype=np.float64), np.asarray(theta_other, dtype=np.float64),
+               np.asarray(m_self, dtype=np.int64), np.asarray(m_other, dtype=np.int64),
+               np.asarray(f_other, dtype=np.int64), mask, out, dist)
         return out[:, 0], out[:, 1], out[:, 3].astype(bool)
 
     def close(self) -> None:

@@ -4,9 +4,12 @@ The tree-expansion sampler starts from a spread of guard-vs-guard states and exp
 rounds before its archive is full, so the coupled states of a long bout (any action of the other
 fighter at any frame, after many exchanges) are reached only by chance: on the CMU boxing graph
 about half of the states a depth-3 game-tree fighter visits had no graph state within tolerance.
-Seeding the archive with the decision states of a few bouts between the scripted human proxy and
-a random fighter (neither uses a reward, so the archive still does not depend on any reward)
-puts such states at the roots of the tree.
+Seeding the archive with the decision states of a few bouts between two scripted human proxies
+(``pairing="human"``, the default) or a human proxy and a random fighter (``"random"``) puts such
+states at the roots of the tree. Neither agent uses a reward, so the archive still does not
+depend on any reward. Bouts of two proxies cover the game-tree fighter's states better than
+bouts of a proxy against a random fighter (86% against 72% on the CMU boxing graph, measured as
+build.BuildOptions records).
 """
 from __future__ import annotations
 
@@ -15,11 +18,17 @@ import numpy as np
 from .sim import N_SF, N_SI, SimTables
 
 
-def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float,
-                     seed: int) -> tuple[np.ndarray, np.ndarray]:
+SEED_PAIRINGS = ("human", "random")
+
+
+def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float, seed: int,
+                     pairing: str = "human") -> tuple[np.ndarray, np.ndarray]:
     """Canonical samples (si (N, N_SI), sf (N, N_SF)) of both fighters at every decision of
-    ``n_bouts`` bouts of ``seconds`` between the human proxy and a random fighter (slots
-    alternate), started from the game's random initial states drawn from ``seed``."""
+    ``n_bouts`` bouts of ``seconds`` between the human proxy and a second human proxy
+    (``pairing="human"``) or a random fighter (``"random"``; slots alternate), started from the
+    game's random initial states drawn from ``seed``."""
+    if pairing not in SEED_PAIRINGS:
+        raise ValueError(f"pairing must be one of {', '.join(SEED_PAIRINGS)}, not {pairing!r}")
     from .agents.base import RandomAgent
     from .agents.human import HumanProxyAgent
     from .game import FightGame, GameConfig
@@ -46,7 +55,8 @@ def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float,
 
     rng = np.random.default_rng(seed)
     for i in range(n_bouts):
-        pair = [_Recorder(HumanProxyAgent()), _Recorder(RandomAgent())]
+        pair = [_Recorder(HumanProxyAgent()),
+                _Recorder(HumanProxyAgent() if pairing == "human" else RandomAgent())]
         if i % 2:
             pair.reverse()
         run_bout(game, pair, seconds, np.random.default_rng(rng.integers(1 << 62)))

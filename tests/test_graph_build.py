@@ -78,6 +78,13 @@ def test_bout_seed_states_are_reward_free_deterministic_canonical_samples(lib, t
     a0 = explore.explore(tables, o.explore_options(), 0)
     a1 = explore.explore(tables, o.explore_options(), 0, extra_initial=(si, sf))
     assert int(np.sum(a1.parent < 0)) > int(np.sum(a0.parent < 0))
+    # the pairing chooses the second fighter (a second human proxy by default, or a random one)
+    sr, fr = bout_seed_states(lib, tables, 2, 10.0, seed=5, pairing="random")
+    assert len(sr) > 10 and not (len(sr) == len(si) and np.array_equal(sr, si))
+    with pytest.raises(ValueError, match="pairing"):
+        bout_seed_states(lib, tables, 1, 1.0, seed=0, pairing="robot")
+    with pytest.raises(ValueError, match="seed_pairing"):
+        dataclasses.replace(BuildOptions(), seed_pairing="robot").validate()
 
 
 def test_sampler_does_not_depend_on_any_reward(built):

@@ -5,8 +5,6 @@ import argparse
 import json
 import statistics
 import sys
-import time
-from pathlib import Path
 
 
 def register(sub) -> None:
@@ -40,7 +38,7 @@ def register(sub) -> None:
 def cmd_fight(args: argparse.Namespace) -> int:
     if args.physics:
         try:
-            from tracker.bout import cmd_physics_fight
+            from tracker.bout_cli import cmd_physics_fight
         except ModuleNotFoundError:
             print("igraph-fight: error: physics bouts need tracker.bout (not available in this install)",
                   file=sys.stderr)

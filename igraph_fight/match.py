@@ -12,7 +12,6 @@ from typing import Callable
 import numpy as np
 
 from motion_graph.atomic import atomic_write_text
-from motion_graph.classify import ATTACK_KINDS, KINDS
 from motion_graph.motion import Motion
 from motion_graph.rotations import matrix_to_quat, quat_to_matrix, yaw_matrix
 
@@ -195,7 +194,6 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
     if result.trace is not None and html:
         tr = result.trace
         pos = [fighter_motion(game, tr, w).positions() for w in (0, 1)]
-        fidx = {0: 0}
         frame_of_t = lambda t: int(np.searchsorted(tr["t"], t - 1e-9))  # noqa: E731
         hits = [{"frame": frame_of_t(h["t"]), "victim": h["victim"]} for h in result.hit_events]
         events = ([{"frame": frame_of_t(h["t"]), "text": f"{'AB'[h['attacker']]} {h['kind']} hits {'AB'[h['victim']]}"}

@@ -122,7 +122,6 @@ def train(game, cfg: RLConfig, out: str | Path | None = None, progress: bool = T
 
     torch.set_num_threads(1)
     torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     style = as_style(cfg.style)
     reward = EventReward(style, game.tables)

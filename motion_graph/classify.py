@@ -100,7 +100,6 @@ def annotate(feat: ClipFeatures, strikes: list[Strike], a: int, b: int, offset: 
 
     # Defences: the head leaves its place above the pelvis (in the body's own turning frame)
     # and the body does not travel far.
-    T = b - a + 1
     hd = feat.facing[a:b + 1] + offset  # the fighting frame turning with the head
     d = P[a:b + 1, p["head"]] - P[a:b + 1, p["pelvis"]]
     c, sn = np.cos(hd), np.sin(hd)

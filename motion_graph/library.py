@@ -233,7 +233,6 @@ class ActionLibrary:
                 nb = min(blend_frames, len(rot) - 1)
                 w = (1.0 - (np.arange(nb) + 1) / (nb + 1))  # weight of the previous end pose
                 for i in range(nb):
-                    pair = np.stack([rot[i], prev_last_rot])
                     rot[i] = _slerp_pair(rot[i], prev_last_rot, w[i] if i > 0 else 1.0)
                 if lt is not None and prev_last_lt is not None:
                     for i in range(nb):

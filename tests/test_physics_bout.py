@@ -120,7 +120,7 @@ def _bout_args(graph, out, seed=3, seconds=3.0):
 
 
 def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_file, tmp_path, capsys):
-    from tracker.bout import cmd_physics_fight
+    from tracker.bout_cli import cmd_physics_fight
     runs = []
     for i in range(2):
         assert cmd_physics_fight(_bout_args(tiny_graph_file, tmp_path / f"run{i}")) == 0
@@ -142,7 +142,8 @@ def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_fil
 
 def test_bout_video_renders(setup, tmp_path):
     """The MP4 of a short bout (offscreen MuJoCo: EGL, else OSMesa)."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout, render_bout_video
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.bout_media import render_bout_video
     from tracker.pd import PDController
     bout = PhysicsBout(setup, [MenuAgent(name="a"), MenuAgent(name="b")], PDController(), BoutConfig(seconds=1.0))
     res = bout.run(seed=1)

@@ -7,7 +7,7 @@ import pytest
 from motion_graph.classify import ATTACK_KINDS, annotate
 from motion_graph.contacts import contact_summary, foot_contacts
 from motion_graph.features import clip_features
-from motion_graph.library import LibraryParams, build_library, segment_files
+from motion_graph.library import build_library, segment_files
 from motion_graph.segment import segment_clip
 from motion_graph.strikes import detect_strikes
 from motion_graph.synthetic import synthetic_boxer

@@ -6,13 +6,11 @@ outlasts PD-only tracking. The candidates trained so far measured within noise o
 tracker/MEASUREMENTS.md)."""
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from tracker.evaluate import evaluate_walks, make_setup
-from tracker.pd import PDController
+from tracker.evaluate import make_setup
 from tracker.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata

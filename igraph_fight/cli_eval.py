@@ -13,6 +13,9 @@ def register(sub) -> None:
     p.add_argument("--opponents", default="human,static,gametree2,gametree3,rl",
                    help="comma list of: human, static, gametree2, gametree3, rl, random, rl_outboxer")
     p.add_argument("--depths", default="1,3,5", help="IG min-max depths, one row each (default 1,3,5)")
+    p.add_argument("--exact2-depths", default="5",
+                   help="also rows IG(d)+exact2 for these depths: two exact plies over the graph's values "
+                        "(NPCController first_ply='exact2'; default 5, '' for none)")
     p.add_argument("--bouts", type=int, default=20, help="bouts per cell (default 20)")
     p.add_argument("--seconds", type=float, default=60.0, help="bout length (default 60 s)")
     p.add_argument("--seed", type=int, default=0)
@@ -53,6 +56,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import EvalConfig, evaluate
 
     cfg = EvalConfig(graph=args.graph, opponents=_list(args.opponents), depths=tuple(int(d) for d in _list(args.depths)),
+                     exact2_depths=tuple(int(d) for d in _list(args.exact2_depths)),
                      bouts=args.bouts, seconds=args.seconds, seed=args.seed, workers=args.workers, style=args.style,
                      rl_checkpoint=args.rl_checkpoint, rl_outboxer_checkpoint=args.rl_outboxer_checkpoint,
                      train_rl=args.train_rl, rl_decisions=args.rl_decisions, rl_cpu_minutes=args.rl_minutes,
@@ -64,7 +68,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         print(json.dumps({k: v for k, v in rep.items() if k != "bouts"}, default=str))
         return 0
     for r, row in rep["table"].items():
-        print(f"{r:6s} " + "  ".join(f"{c} {x['mean']:+.1f} [{x['ci_low']:+.1f}, {x['ci_high']:+.1f}]"
+        print(f"{r:13s} " + "  ".join(f"{c} {x['mean']:+.1f} [{x['ci_low']:+.1f}, {x['ci_high']:+.1f}]"
                                      for c, x in row.items()))
     if rep["coverage"] is not None:
         print(f"coverage {100 * rep['coverage']:.1f}%")

@@ -31,6 +31,15 @@ centroid (the exact depth-1 best agrees with the state's table answer about 30% 
 a state has edges for only part of its menu. The table answer also presumes the live state is
 snapped onto the state; an IGAgent snaps only after table answers (``Decision.edge >= 0``).
 
+``first_ply="exact2"`` (opt-in) searches the first *two* plies exactly (every legal action, then
+every answer of whoever decides next, the opponent minimising) and uses the graph's values only
+at the leaves (agents.gametree._search_graph_leaves): a game-tree search of depth 2 with the
+Interaction Graph as its evaluation function. Measured on the default CMU boxing graph (10 bouts
+of 60 s, seed 0, infighter; see the README): +6.0 per bout against the exact depth-2 game tree
+and -0.1 against depth 3, where the same two exact plies without the graph's leaf values score
++1.3 and -6.6 and the table answer -4.3 and -7.9; it costs about 1 ms a decision instead of
+microseconds (the depth-3 game tree: 3.4 ms).
+
 The policy table is an immutable object; ``set_style``/``set_depth`` build a new one in a worker
 thread while the old one keeps answering, then replace the reference in one assignment, so a
 reader sees either the old or the new table, never a mix.
@@ -53,6 +62,10 @@ from planner import Policy, SearchGraph, Style, compute_policy, load_style
 
 from .graph import InteractionGraph, load_graph
 from .sim import _expand_one
+
+
+#: NPCController's first_ply choices (see the module docstring)
+FIRST_PLY = ("table", "exact", "exact2")
 
 
 class Observation(NamedTuple):
@@ -673,9 +686,10 @@ class NPCController:
             probability of an edge by (1 + penalty * times used) (per controller).
         seed: seed of the roulette's random generator.
         offgraph: "lookahead" (default) or "nearest": how off-graph decisions are answered.
-        first_ply: "table" (default: the policy table on the graph, the paper's runtime) or
-            "exact": the simulated one-step lookahead for every decision (module docstring);
-            act() only (act_batch answers from the table as before).
+        first_ply: "table" (default: the policy table on the graph, the paper's runtime),
+            "exact": the simulated one-step lookahead for every decision, or "exact2": two exact
+            plies with the graph's values at the leaves (module docstring); act() only
+            (act_batch answers from the table as before).
     """
 
     def __init__(self, graph: InteractionGraph | str | Path, library=None, style: Style | str | Path = "balanced",
@@ -684,8 +698,8 @@ class NPCController:
                  first_ply: str = "table") -> None:
         if offgraph not in ("lookahead", "nearest"):
             raise ValueError("offgraph must be 'lookahead' or 'nearest'")
-        if first_ply not in ("table", "exact"):
-            raise ValueError("first_ply must be 'table' or 'exact'")
+        if first_ply not in FIRST_PLY:
+            raise ValueError(f"first_ply must be one of {', '.join(FIRST_PLY)}, not {first_ply!r}")
         self.offgraph = offgraph
         self.first_ply = first_ply
         if not isinstance(graph, InteractionGraph):
@@ -729,6 +743,9 @@ class NPCController:
         self.tables = SimTables.from_library(library, SimParams(**sim_opts) if sim_opts else SimParams())
         self._T = self.tables.kernel_tuple()
         self._kinds = np.asarray(self.tables.kinds, dtype=np.int64)
+        self._kinds32 = self._kinds.astype(np.int32)
+        self._max_menu = int(max(1, np.diff(self._menu_off).max())) if A else 1
+        self._count = np.zeros(2, dtype=np.int64)  # exact2: events simulated, nodes expanded
         self._pi, self._pf, self._pc = _pack_index(
             ix, {k: ix_parts[k] for k in ("ukeys", "nkeys", "bst2", "bst3")},
             [self.f0, ix_parts["fm"], ix_parts["ncell"]],
@@ -822,13 +839,33 @@ class NPCController:
                           int(obs.mask_other))
         return int(a), float(q)
 
+    def _exact2(self, table: _Table, obs: Observation) -> tuple[int, float]:
+        """Two exact plies + the graph's values at the leaves (``first_ply="exact2"``)."""
+        from .agents.common import style_params
+        from .agents.gametree import _search_graph_leaves
+        if self._menu_off[obs.m_self + 1] <= self._menu_off[obs.m_self]:
+            return -1, 0.0
+        si = np.array([obs.m_self, obs.m_other, obs.f_other, obs.mask_other], dtype=np.int64)
+        sf = np.array([obs.r, obs.theta_self, obs.theta_other], dtype=np.float64)
+        P = style_params(table.style_obj)
+        j, q = _search_graph_leaves(self._T, self._menu_off, self._menu_ids, self._kinds32, P, table.la[2],
+                                    float(self.tables.fps), si, sf, self._max_menu, self._count, float(table.la[3][8]),
+                                    self._pi, self._pf, self._pc, table.la[0], table.la[1])
+        if j < 0:
+            return -1, 0.0
+        return int(self._menu_ids[self._menu_off[obs.m_self] + j]), float(q)
+
     def act(self, obs: Observation) -> Decision:
         """The action for one live state (see the module docstring)."""
         table = self._table  # one read: a consistent snapshot
         a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_ea, table.q_me, float(obs.r),
                                   float(obs.theta_self), float(obs.theta_other), int(obs.m_self), int(obs.m_other),
                                   int(obs.f_other), int(obs.mask_other))
-        if self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
+        if self.first_ply == "exact2":
+            xa, _ = self._exact2(table, obs)
+            if xa >= 0:
+                a, e = xa, -1
+        elif self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
             la, _ = self._lookahead(table, obs)
             if la >= 0:
                 a, e = la, -1

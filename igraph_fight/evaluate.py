@@ -3,7 +3,9 @@
     igraph-fight evaluate --graph G.igz --opponents human,static,gametree2,gametree3,rl \\
         --depths 1,3,5 --bouts 20 --seconds 60 --seed 0 --out out/eval --workers 2
 
-Rows are Interaction Graph fighters IG(d) = IGAgent(NPCController(graph, style, depth=d)),
+Rows are Interaction Graph fighters IG(d) = IGAgent(NPCController(graph, style, depth=d)) (the
+paper's runtime: the policy table), and with ``exact2_depths`` also IG(d)+exact2, the same
+controller deciding with ``first_ply="exact2"`` (two exact plies over the graph's values);
 columns the opponents. Bout i of every (row, column) pair starts from the same random initial
 state (FightGame.new_initial_state with a generator seeded by (seed, i): common random
 numbers), and the agents get the same random stream; the IG fighter plays slot A in even bouts
@@ -26,6 +28,7 @@ for identical inputs.
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -58,6 +61,17 @@ OPPONENT_DOC = {
     "random": "uniform legal actions",
 }
 OPPONENTS = ("human", "static", "gametree2", "gametree3", "rl", "random", "rl_outboxer")
+EXACT2 = "+exact2"  # row suffix: the IG fighter searches two exact plies over the graph's values
+
+
+def ig_rows(cfg: "EvalConfig") -> list[str]:
+    """The table's rows: IG(d) per depth, then IG(d)+exact2 per exact2 depth."""
+    return [f"IG({d})" for d in cfg.depths] + [f"IG({d}){EXACT2}" for d in cfg.exact2_depths]
+
+
+def row_depth(row: str) -> int:
+    """d of a row name IG(d) or IG(d)+exact2."""
+    return int(row[3:row.index(")")])
 
 
 @dataclass
@@ -67,6 +81,7 @@ class EvalConfig:
     graph: str
     opponents: tuple = ("human", "static", "gametree2", "gametree3", "rl")
     depths: tuple = (1, 3, 5)
+    exact2_depths: tuple = (5,)                 # extra rows IG(d)+exact2: NPCController(first_ply="exact2")
     bouts: int = 20
     seconds: float = 60.0
     seed: int = 0
@@ -106,7 +121,8 @@ def build_context(cfg: EvalConfig, rl: dict | None = None) -> dict:
 
     graph = load_graph(cfg.graph)
     lib = graph.load_library()
-    controllers = {d: NPCController(graph, lib, style=cfg.style, depth=d) for d in cfg.depths}
+    controllers = {d: NPCController(graph, lib, style=cfg.style, depth=d)
+                   for d in sorted(set(cfg.depths) | set(cfg.exact2_depths))}
     tables = next(iter(controllers.values())).tables if controllers else None
     game = FightGame(lib, GameConfig(max_seconds=cfg.seconds, sim=_sim_params(graph)), tables=tables)
     from .agents.gametree import GameTreeSearch
@@ -134,8 +150,11 @@ def make_agent(ctx: dict, name: str):
 
     cfg = ctx["cfg"]
     if name.startswith("IG("):
-        d = int(name[3:-1])
-        return IGAgent(ctx["controllers"][d], name=name)
+        c = ctx["controllers"][row_depth(name)]
+        if name.endswith(EXACT2):
+            c = copy.copy(c)  # the same graph, index and policy table; only the decision rule differs
+            c.first_ply = "exact2"
+        return IGAgent(c, name=name)
     if name == "human":
         return HumanProxyAgent()
     if name == "static":
@@ -353,7 +372,7 @@ def _style_swap_ms(ctx: dict, repeat: int = 3) -> dict:
 # ----- the evaluation ------------------------------------------------------------------------------
 def tasks_for(cfg: EvalConfig, with_rl: bool = True) -> list[dict]:
     """Every bout: the table's (row, column, i), then the RL policies' head-to-head bouts."""
-    rows = [f"IG({d})" for d in cfg.depths]
+    rows = ig_rows(cfg)
     tasks = []
     for r in rows:
         for c in cfg.opponents:
@@ -466,7 +485,7 @@ def _kind_hist(rows: list[dict], who: str) -> dict:
 
 def _aggregate(cfg: EvalConfig, ctx: dict, rl: dict, results: list[dict], notes: list[str]) -> dict:
     graph = ctx["graph"]
-    rows = [f"IG({d})" for d in cfg.depths]
+    rows = ig_rows(cfg)
     table: dict = {}
     off: dict = {}
     for r in rows:
@@ -477,7 +496,7 @@ def _aggregate(cfg: EvalConfig, ctx: dict, rl: dict, results: list[dict], notes:
             cell["hits_ig"] = float(np.mean([x["hits_row"] for x in sub]))
             cell["hits_opponent"] = float(np.mean([x["hits_col"] for x in sub]))
             cell["mean_distance_m"] = float(np.mean([x["mean_distance_m"] for x in sub]))
-            cell["paper"] = PAPER.get(c, {}).get(int(r[3:-1]))
+            cell["paper"] = PAPER.get(c, {}).get(row_depth(r)) if not r.endswith(EXACT2) else None
             table[r][c] = cell
             n = sum(x["ig"]["decisions"] for x in sub)
             off[r][c] = sum(x["ig"]["off_graph"] for x in sub) / max(n, 1)
@@ -568,7 +587,9 @@ def _aggregate(cfg: EvalConfig, ctx: dict, rl: dict, results: list[dict], notes:
                   "content_hash": graph.content_hash, "f0": graph.header.get("options", {}).get("f0"),
                   "link_tol_r_m": graph.header.get("options", {}).get("link_tol_r_m"),
                   "link_tol_theta_rad": graph.header.get("options", {}).get("link_tol_theta_rad")},
-        "ig_fighter": {"style": cfg.style, "agent": "IGAgent(NPCController(graph, style, depth=d)) with the defaults"},
+        "ig_fighter": {"style": cfg.style, "agent": "IGAgent(NPCController(graph, style, depth=d)) with the defaults"
+                       + ("; rows IG(d)+exact2: the same controller with first_ply='exact2' (two exact plies, the "
+                          "graph's values at the leaves)" if cfg.exact2_depths else "")},
         "paper": {"table": {c: {f"IG({d})": v for d, v in PAPER[c].items()} for c in PAPER}, "coverage": PAPER_COVERAGE},
         **{k: v for k, v in det.items() if k != "bouts_detail"},
         "decision_us": decision_us,
@@ -610,6 +631,12 @@ def _targets(cfg: EvalConfig, table: dict, coverage) -> dict:
                                              if c in ("human", "static", "gametree2", "rl")}
         if "gametree3" in cfg.opponents:
             t["IG(5)_vs_gametree3_at_least_0"] = bool(table[top]["gametree3"]["mean"] >= 0)
+    x2 = f"IG(5){EXACT2}"
+    if x2 in table:
+        t[f"{x2}_positive_ci_excludes_0"] = {c: bool(table[x2][c]["ci_low"] > 0) for c in cfg.opponents
+                                              if c in ("human", "static", "gametree2", "rl")}
+        if "gametree3" in cfg.opponents:
+            t[f"{x2}_vs_gametree3_at_least_0"] = bool(table[x2]["gametree3"]["mean"] >= 0)
     if coverage is not None:
         t["coverage_at_least_93"] = bool(coverage >= 0.93)
         t["coverage_goal_97"] = bool(coverage >= 0.97)

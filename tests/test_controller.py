@@ -286,3 +286,56 @@ def test_parallel_and_serial_batch_kernels_have_distinct_cache_entries():
     names = {C._act_batch.py_func.__qualname__, C._act_batch_serial.py_func.__qualname__}
     assert len(names) == 2
     assert C._act_batch.targetoptions.get("parallel") and not C._act_batch_serial.targetoptions.get("parallel")
+
+
+def _exact2_reference(c: NPCController, o: Observation) -> np.ndarray:
+    """Q of every menu action under first_ply="exact2", in Python from the simulator and Eq. 4:
+    W(a) + gamma * opt_b [W(b) + gamma * V(nearest state of the landing sample)]."""
+    from motion_graph.classify import KINDS
+    from planner import edge_rewards
+
+    from igraph_fight import sim
+    from igraph_fight.edge_features import edge_features
+    t = c._table
+    style, g = t.style_obj, float(t.policy.gamma)
+
+    def children(si, sf):
+        acts = c.tables.menu(int(si[sim.SI_MSELF])).astype(np.int64)
+        ci, cf, ft, sw = sim.expand_samples(c._T, si[None], sf[None], np.zeros(len(acts), np.int64), acts)
+        w_me, w_opp = edge_rewards(edge_features(c.tables, np.full(len(acts), si[sim.SI_MOTHER]), acts, ft), style,
+                                   list(KINDS))
+        return acts, ci, cf, sw, w_me, w_opp
+
+    si = np.array([o.m_self, o.m_other, o.f_other, o.mask_other], dtype=np.int64)
+    sf = np.array([o.r, o.theta_self, o.theta_other], dtype=np.float64)
+    acts, ci, cf, sw, w_me, _ = children(si, sf)
+    q = np.array(w_me, dtype=np.float64)
+    for k in range(len(acts)):
+        me = sw[k] == 0
+        a2, c2i, c2f, sw2, w2me, w2opp = children(ci[k], cf[k])
+        if not len(a2):
+            continue
+        vals = []
+        for j in range(len(a2)):
+            s, _, _ = c.locate(Observation(c2f[j, 0], c2f[j, 1], c2f[j, 2], int(c2i[j, 0]), int(c2i[j, 1]),
+                                           int(c2i[j, 2]), int(c2i[j, 3])))
+            leaf_me = me == (sw2[j] == 0)
+            v = float(t.la[0][s] if leaf_me else t.la[1][s]) if s >= 0 else 0.0
+            vals.append((w2me[j] if me else w2opp[j]) + g * v)
+        q[k] += g * (max(vals) if me else min(vals))
+    return acts, q
+
+
+def test_exact2_searches_two_exact_plies_over_the_graph_values(graph_lib):
+    g, lib = graph_lib
+    c = NPCController(g, lib, style="infighter", depth=3, first_ply="exact2")
+    obs = [o for i, o in enumerate(_observations(g, lib, n=60, seed=5)) if i % 5 in (0, 1)]
+    for o in obs:
+        acts, q = _exact2_reference(c, o)
+        a, qa = c._exact2(c._table, o)
+        assert a in set(int(x) for x in acts) and c.act(o).action == a
+        assert qa == pytest.approx(q.max(), abs=1e-6)   # the kernel's best is a best of the reference
+        assert q[list(acts).index(a)] == pytest.approx(q.max(), abs=1e-6)
+    with pytest.raises(ValueError, match="first_ply"):
+        NPCController(g, lib, first_ply="exact3")
+    c.close()

@@ -31,6 +31,7 @@ def tiny(boxing_files, tmp_path_factory):
 
 def _cfg(tiny, **kw):
     base = dict(graph=str(tiny / "tiny.igz"), opponents=("random", "static", "gametree3", "rl"), depths=(1, 2),
+                exact2_depths=(2,),
                 bouts=2, seconds=3.0, seed=3, workers=1, rl_checkpoint=str(tiny / "rl.pt"),
                 rl_outboxer_checkpoint=str(tiny / "rl_out.pt"), head_to_head=("random",), progress=False)
     base.update(kw)
@@ -49,7 +50,9 @@ def test_evaluate_writes_the_contract_and_is_independent_of_workers(tiny, tmp_pa
     for k in ("train_minutes", "decisions", "retrain_minutes_new_style"):
         assert r1["rl"][k] is not None
     assert r1["style_swap_ms"] > 0 and 0.0 <= r1["coverage"] <= 1.0
-    assert set(r1["decision_us"]) >= {"IG(1)", "IG(2)", "random", "static", "gametree3", "rl", "rl_outboxer"}
+    assert set(r1["decision_us"]) >= {"IG(1)", "IG(2)", "IG(2)+exact2", "random", "static", "gametree3", "rl",
+                                      "rl_outboxer"}
+    assert r1["table"]["IG(2)+exact2"]["gametree3"]["paper"] is None  # no paper value for the hybrid row
     assert r1["results_digest"] == r2["results_digest"]
     assert r1["table"] == r2["table"] and r1["kinds"] == r2["kinds"]
     on_disk = json.loads((tmp_path / "w1" / "results.json").read_text())
@@ -62,7 +65,8 @@ def test_evaluate_writes_the_contract_and_is_independent_of_workers(tiny, tmp_pa
     assert {b["slot"] for b in bouts} == {0, 1}
     assert all(b["slot"] == b["i"] % 2 for b in bouts)
     # another seed, other bouts (the initial distance differs, so the mean distance does)
-    r3 = evaluate(_cfg(tiny, seed=4, opponents=("random",), depths=(1,), head_to_head=()), tmp_path / "s4")
+    r3 = evaluate(_cfg(tiny, seed=4, opponents=("random",), depths=(1,), exact2_depths=(), head_to_head=()),
+                  tmp_path / "s4")
     d1 = [b["mean_distance_m"] for b in bouts if b["row"] == "IG(1)" and b["col"] == "random"]
     d3 = [b["mean_distance_m"] for b in r3["bouts"]]
     assert len(d3) == 2 and d1 != d3
@@ -72,8 +76,8 @@ def test_tasks_cover_every_cell_with_the_same_bout_indices():
     cfg = EvalConfig(graph="g", opponents=("human", "static"), depths=(1, 3, 5), bouts=4, head_to_head=("random",))
     tasks = tasks_for(cfg)
     table = [t for t in tasks if t["kind"] == "table"]
-    assert len(table) == 3 * 2 * 4 and sorted(t["id"] for t in tasks) == list(range(len(tasks)))
-    for r in ("IG(1)", "IG(3)", "IG(5)"):
+    assert len(table) == 4 * 2 * 4 and sorted(t["id"] for t in tasks) == list(range(len(tasks)))
+    for r in ("IG(1)", "IG(3)", "IG(5)", "IG(5)+exact2"):
         for c in ("human", "static"):
             assert sorted(t["i"] for t in table if t["row"] == r and t["col"] == c) == [0, 1, 2, 3]
 

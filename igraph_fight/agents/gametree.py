@@ -31,6 +31,7 @@ from numba import njit
 from planner.rewards import _fight_edge
 
 from .. import sim
+from ..controller import _locate_p
 from ..sim import N_FEAT, N_SF, N_SI
 from ..state import to_sample
 from .common import as_style, style_params
@@ -194,6 +195,67 @@ def _search(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, depth, gamma, prun
                 B[lev] = BV[lev]
         if prune and A[lev] >= B[lev]:
             POS[lev] = K[lev]
+
+
+@njit(cache=True)
+def _search_graph_leaves(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, max_menu, count, gamma, pi, pf, pc,
+                         V_me, V_opp):
+    """Two exact plies with Interaction Graph values at the leaves (NPCController's
+    ``first_ply="exact2"``): every action of the controlled fighter and every answer of whoever
+    decides next are simulated exactly from the live canonical sample and scored with Eq. 4 (W_me
+    or W_opp); below them the value of the graph state nearest to each landing sample (V_me when
+    the controlled fighter decides there, else V_opp; the policy's depth-(D-1) values, an
+    approximation of depth D-2) is discounted by ``gamma``:
+
+        Q(a) = W(a) + gamma * opt_b [W(b) + gamma * V(nearest(landing(a, b)))],
+
+    opt = max where the controlled fighter decides after a, min where the opponent does.
+    An action whose opponent already has an answer that keeps it no better than the best action so
+    far is left (alpha-beta at the root: the choice and its Q are those of the full search).
+    Returns (menu index of the best action, its Q; -1 for an empty menu)."""
+    CI = np.empty((2, max_menu, N_SI), dtype=np.int64)
+    CF = np.empty((2, max_menu, N_SF))
+    FT = np.empty((2, max_menu, N_FEAT))
+    SW = np.empty((2, max_menu), dtype=np.int64)
+    W = np.empty((2, max_menu))
+    DUR = np.empty((2, max_menu))
+    KIND = np.empty((2, max_menu), dtype=np.int32)
+    OKIND = np.empty((2, max_menu), dtype=np.int32)
+    ORD = np.empty((2, max_menu), dtype=np.int64)
+    S = np.empty((2, 3))
+    act = np.empty(2, dtype=np.int64)
+    frm = np.empty(2, dtype=np.int64)
+    mask = np.empty(2, dtype=np.int64)
+    stats = np.empty(sim.N_STAT)
+    k = _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, True, 0, False,
+                CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats, count)
+    best_j = -1
+    best_q = -_INF
+    for j in range(k):
+        cme = SW[0, j] == 0
+        nk = _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, CI[0, j], CF[0, j], cme, 1, False,
+                     CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats, count)
+        v = 0.0
+        if nk > 0:
+            v = -_INF if cme else _INF
+            for i in range(nk):
+                lme = cme if SW[1, i] == 0 else not cme
+                s, _, _, _ = _locate_p(pi, pf, pc, CF[1, i, sim.SF_R], CF[1, i, sim.SF_TH_SELF],
+                                       CF[1, i, sim.SF_TH_OTHER], CI[1, i, sim.SI_MSELF], CI[1, i, sim.SI_MOTHER],
+                                       CI[1, i, sim.SI_FOTHER], CI[1, i, sim.SI_MASK])
+                leaf = 0.0
+                if s >= 0:
+                    leaf = np.float64(V_me[s]) if lme else np.float64(V_opp[s])
+                x = W[1, i] + gamma * leaf
+                if (cme and x > v) or (not cme and x < v):
+                    v = x
+                if not cme and best_j >= 0 and W[0, j] + gamma * v <= best_q + _TIE:
+                    break  # the opponent's answer already makes j no better than the best so far
+        q = W[0, j] + gamma * v
+        if q > best_q + _TIE:
+            best_q = q
+            best_j = j
+    return best_j, best_q
 
 
 class GameTreeSearch:

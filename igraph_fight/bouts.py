@@ -14,23 +14,27 @@ from .match import run_bout, write_bout_artifacts
 
 def run_style_bout(graph_path: str | Path, style_a: str, style_b: str, depth_a: int = 5, depth_b: int = 5,
                    seconds: float = 60.0, seed: int = 1, out: str | Path = "out/fight", library=None,
-                   swap_a: tuple[float, str] | None = None, progress: bool = False) -> dict:
+                   swap_a: tuple[float, str] | None = None, progress: bool = False,
+                   first_ply_a: str = "table", first_ply_b: str = "table") -> dict:
     """Play one traced bout and write its artifacts; returns the summary (with ``artifacts``).
 
     swap_a: (t seconds, style) to switch fighter A's style mid-bout (recomputed in the background).
+    first_ply_a / _b: each fighter's decision rule (NPCController's first_ply: table, exact, exact2).
     """
     graph = load_graph(graph_path)
     if library is not None and not hasattr(library, "n_actions"):
         from motion_graph.library import load_library
         library = load_library(library)
     lib = library if library is not None else graph.load_library()
-    ca = NPCController(graph, lib, style=style_a, depth=depth_a)
-    cb = NPCController(graph, lib, style=style_b, depth=depth_b)
+    ca = NPCController(graph, lib, style=style_a, depth=depth_a, first_ply=first_ply_a)
+    cb = NPCController(graph, lib, style=style_b, depth=depth_b, first_ply=first_ply_b)
     sim_opts = graph.header.get("options", {}).get("sim")
     from .sim import SimParams
     game = FightGame(lib, GameConfig(max_seconds=seconds, sim=SimParams(**sim_opts) if sim_opts else SimParams()),
                      tables=ca.tables)
-    a, b = IGAgent(ca, f"{ca.style}({depth_a})"), IGAgent(cb, f"{cb.style}({depth_b})")
+    tag = {"table": "", "exact": "+exact", "exact2": "+exact2"}
+    a = IGAgent(ca, f"{ca.style}({depth_a}){tag[first_ply_a]}")
+    b = IGAgent(cb, f"{cb.style}({depth_b}){tag[first_ply_b]}")
     schedule = []
     if swap_a is not None:
         t, st = swap_a

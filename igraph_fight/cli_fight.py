@@ -17,6 +17,10 @@ def register(sub) -> None:
     p.add_argument("--depth-b", type=int, default=5, help="min-max depth of B (default 5)")
     p.add_argument("--swap-a", default=None, metavar="T:STYLE",
                    help="switch A's style at T seconds (e.g. 30:outboxer)")
+    p.add_argument("--first-ply-a", choices=("table", "exact", "exact2"), default="table",
+                   help="A's decision rule: the policy table (default), one exact ply, or two exact plies over "
+                        "the graph's values (stronger, about 1 ms a decision)")
+    p.add_argument("--first-ply-b", choices=("table", "exact", "exact2"), default="table", help="B's decision rule")
     p.add_argument("--seconds", type=float, default=60.0)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", default="out/fight", help="output folder (default out/fight)")
@@ -36,7 +40,12 @@ def register(sub) -> None:
 
 
 def cmd_fight(args: argparse.Namespace) -> int:
+    fp_a, fp_b = getattr(args, "first_ply_a", "table"), getattr(args, "first_ply_b", "table")
     if args.physics:
+        if fp_a != "table" or fp_b != "table":
+            print("igraph-fight: error: --first-ply-a/-b apply to kinematic bouts only (physics bouts decide from "
+                  "the policy table)", file=sys.stderr)
+            return 2
         try:
             from tracker.bout_cli import cmd_physics_fight
         except ModuleNotFoundError:
@@ -51,7 +60,8 @@ def cmd_fight(args: argparse.Namespace) -> int:
         t, _, style = args.swap_a.partition(":")
         swap = (float(t), style)
     summary = run_style_bout(args.graph, args.a, args.b, args.depth_a, args.depth_b, args.seconds, args.seed,
-                             args.out, library=args.library, swap_a=swap, progress=not args.json)
+                             args.out, library=args.library, swap_a=swap, progress=not args.json,
+                             first_ply_a=fp_a, first_ply_b=fp_b)
     if args.json:
         print(json.dumps(summary))
         return 0

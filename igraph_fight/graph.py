@@ -181,15 +181,11 @@ class InteractionGraph:
         _, inv = np.unique(key, axis=0, return_inverse=True)
         return inv.reshape(-1)
 
-    def nearest_state(self, nextset: int, m_other: int, f_other: int, mask_other: int, r: float,
-                      theta_self: float, theta_other: float) -> tuple[int, float, bool]:
-        """The state nearest (paper's normalised distance) to a live state among the compatible
-        ones: same Next-set id of M_self (SimTables.nextset), M_other and mask, |F_other
-        difference| < F0. Returns (state, distance, within the linking tolerance); (-1, inf,
-        False) when no compatible state exists."""
+    def _compatible(self, nextset: int, m_other: int, f_other: int, mask_other: int) -> np.ndarray | None:
+        """States of the compatible group of a live state (same Next-set id, M_other and mask,
+        |F_other difference| < F0); None when the group holds none."""
         a = self.arrays
-        opts = self.header.get("options", {})
-        f0 = int(opts.get("f0", 3))
+        f0 = int(self.header.get("options", {}).get("f0", 3))
         groups = self.__dict__.get("_group_index")
         if groups is None:
             key = (a["state_nextset"].astype(np.int64) * 1_000_003 + a["state_m_other"]) * 2_000_003 + a["state_mask_other"]
@@ -200,9 +196,24 @@ class InteractionGraph:
             self.__dict__["_group_index"] = groups
         cand = groups.get(int((nextset * 1_000_003 + m_other) * 2_000_003 + mask_other))
         if cand is None:
-            return -1, float("inf"), False
+            return None
         cand = cand[np.abs(a["state_f_other"][cand] - f_other) < f0]
-        if len(cand) == 0:
+        return cand if len(cand) else None
+
+    def _link_tolerance(self) -> tuple[float, float]:
+        opts = self.header.get("options", {})
+        return float(opts.get("link_tol_r_m", 0.1)), float(opts.get("link_tol_theta_rad", np.radians(20)))
+
+    def nearest_state(self, nextset: int, m_other: int, f_other: int, mask_other: int, r: float,
+                      theta_self: float, theta_other: float) -> tuple[int, float, bool]:
+        """The state nearest (paper's normalised distance) to a live state among the compatible
+        ones: same Next-set id of M_self (SimTables.nextset), M_other and mask, |F_other
+        difference| < F0. Returns (state, distance, that state within the linking tolerance);
+        (-1, inf, False) when no compatible state exists."""
+        a = self.arrays
+        opts = self.header.get("options", {})
+        cand = self._compatible(nextset, m_other, f_other, mask_other)
+        if cand is None:
             return -1, float("inf"), False
         s_r = float(opts.get("s_r_m", 0.5))
         s_t = float(opts.get("s_theta_rad", np.pi / 6))
@@ -211,10 +222,24 @@ class InteractionGraph:
         d2 = _wrap(a["state_theta_other"][cand] - theta_other)
         d = (dr / s_r) ** 2 + (d1 / s_t) ** 2 + (d2 / s_t) ** 2
         i = int(np.lexsort((cand, d))[0])
-        tr = float(opts.get("link_tol_r_m", 0.1))
-        tt = float(opts.get("link_tol_theta_rad", np.radians(20)))
+        tr, tt = self._link_tolerance()
         within = abs(dr[i]) <= tr and abs(d1[i]) <= tt and abs(d2[i]) <= tt
         return int(cand[i]), float(np.sqrt(d[i])), bool(within)
+
+    def covers(self, nextset: int, m_other: int, f_other: int, mask_other: int, r: float, theta_self: float,
+               theta_other: float) -> bool:
+        """Whether some compatible state lies within the linking tolerance of a live state (the
+        coverage of the paper's section 7.1). The nearest state by the normalised distance can
+        miss the tolerance while another state meets it (a larger angle, a smaller distance):
+        nearest_state's flag is the stricter test."""
+        a = self.arrays
+        cand = self._compatible(nextset, m_other, f_other, mask_other)
+        if cand is None:
+            return False
+        tr, tt = self._link_tolerance()
+        ok = ((np.abs(a["state_r"][cand] - r) <= tr) & (np.abs(_wrap(a["state_theta_self"][cand] - theta_self)) <= tt)
+              & (np.abs(_wrap(a["state_theta_other"][cand] - theta_other)) <= tt))
+        return bool(ok.any())
 
     def locate(self, tables, world, who: int) -> tuple[int, float, bool]:
         """nearest_state for avatar ``who`` of a live world (igraph_fight.state.WorldState) at its
@@ -223,6 +248,13 @@ class InteractionGraph:
         si, sf = to_sample(tables, world, who)
         return self.nearest_state(int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]),
                                   float(sf[1]), float(sf[2]))
+
+    def covers_live(self, tables, world, who: int) -> bool:
+        """covers() for avatar ``who`` of a live world at its decision instant."""
+        from .state import to_sample
+        si, sf = to_sample(tables, world, who)
+        return self.covers(int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]),
+                           float(sf[1]), float(sf[2]))
 
     # ----- summaries ------------------------------------------------------------------------
     def info(self) -> dict:

@@ -327,3 +327,29 @@ def test_locate_maps_a_live_state_to_its_graph_state(built, tables):
                                  z=w.z + np.array([0.0, 0.03 * np.cos(sf[1])]))
         t2, d2, within2 = g.locate(tables, w2, 0)
         assert within2 and d2 > 0
+
+
+def test_covers_is_the_existence_of_a_state_within_tolerance(built):
+    """covers(): some compatible state within the linking tolerance (brute force over all states);
+    nearest_state's flag tests only the nearest one, so it never says yes where covers says no."""
+    g, _ = built
+    a = g.arrays
+    opts = g.header["options"]
+    tr, tt, f0 = opts["link_tol_r_m"], opts["link_tol_theta_rad"], opts["f0"]
+    wrap = lambda x: (x + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
+    rng = np.random.default_rng(4)
+    agree = 0
+    for _ in range(300):
+        s = int(rng.integers(g.n_states))
+        q = (int(a["state_nextset"][s]), int(a["state_m_other"][s]), int(a["state_f_other"][s]) + int(rng.integers(-3, 4)),
+             int(a["state_mask_other"][s]), float(a["state_r"][s] + rng.normal(0, 0.15)),
+             float(a["state_theta_self"][s] + rng.normal(0, 0.5)), float(a["state_theta_other"][s] + rng.normal(0, 0.5)))
+        ok = ((a["state_nextset"] == q[0]) & (a["state_m_other"] == q[1]) & (np.abs(a["state_f_other"] - q[2]) < f0)
+              & (a["state_mask_other"] == q[3]) & (np.abs(a["state_r"] - q[4]) <= tr)
+              & (np.abs(wrap(a["state_theta_self"] - q[5])) <= tt) & (np.abs(wrap(a["state_theta_other"] - q[6])) <= tt))
+        cov = g.covers(*q)
+        assert cov == bool(ok.any())
+        _, _, within = g.nearest_state(*q)
+        assert not within or cov
+        agree += int(within == cov)
+    assert 0 < agree <= 300

@@ -54,7 +54,7 @@ def register(sub) -> None:
                         "each other (default 0.75,30; the rest take any angle)")
     p.add_argument("--seed-bouts", type=int, default=None, metavar="N",
                    help="also start the sampler from the decision states of N reward-free bouts "
-                        "(30 s each; igraph_fight.seeding; default 512)")
+                        "(30 s each; igraph_fight.seeding; default 1024)")
     p.add_argument("--seed-pairing", choices=("human", "random"), default=None,
                    help="seed bouts between two human proxies (default) or a human proxy and a random fighter")
     p.add_argument("--next-threshold", type=float, default=None,

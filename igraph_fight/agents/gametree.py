@@ -40,6 +40,18 @@ _INF = 1e300
 _TIE = 1e-9
 
 
+@njit(cache=True, inline="always")
+def _buffers(levels, max_menu):
+    """_expand's buffers for ``levels`` levels of children (CI, CF, FT, SW, W, DUR, KIND, OKIND,
+    ORD) and the simulator's scratch (S, act, frm, mask, stats)."""
+    return (np.empty((levels, max_menu, N_SI), dtype=np.int64), np.empty((levels, max_menu, N_SF)),
+            np.empty((levels, max_menu, N_FEAT)), np.empty((levels, max_menu), dtype=np.int64),
+            np.empty((levels, max_menu)), np.empty((levels, max_menu)), np.empty((levels, max_menu), dtype=np.int32),
+            np.empty((levels, max_menu), dtype=np.int32), np.empty((levels, max_menu), dtype=np.int64),
+            np.empty((2, 3)), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
+            np.empty(sim.N_STAT))
+
+
 @njit(cache=True)
 def _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, me, level, order,
             CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats, count):
@@ -95,20 +107,7 @@ def _search(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, depth, gamma, prun
     (``root_me``) or its opponent decides; an explicit stack (numba cannot cache recursive
     functions). Returns (root value, menu index of the best child; -1 for a dead end)."""
     L = max(depth, 1) + 1
-    CI = np.empty((L, max_menu, N_SI), dtype=np.int64)
-    CF = np.empty((L, max_menu, N_SF))
-    FT = np.empty((L, max_menu, N_FEAT))
-    SW = np.empty((L, max_menu), dtype=np.int64)
-    W = np.empty((L, max_menu))
-    DUR = np.empty((L, max_menu))
-    KIND = np.empty((L, max_menu), dtype=np.int32)
-    OKIND = np.empty((L, max_menu), dtype=np.int32)
-    ORD = np.empty((L, max_menu), dtype=np.int64)
-    S = np.empty((2, 3))
-    act = np.empty(2, dtype=np.int64)
-    frm = np.empty(2, dtype=np.int64)
-    mask = np.empty(2, dtype=np.int64)
-    stats = np.empty(sim.N_STAT)
+    CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats = _buffers(L, max_menu)
     # per-level frame of the stack
     K = np.zeros(L, dtype=np.int64)
     POS = np.zeros(L, dtype=np.int64)
@@ -213,20 +212,7 @@ def _search_graph_leaves(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, max_m
     An action whose opponent already has an answer that keeps it no better than the best action so
     far is left (alpha-beta at the root: the choice and its Q are those of the full search).
     Returns (menu index of the best action, its Q; -1 for an empty menu)."""
-    CI = np.empty((2, max_menu, N_SI), dtype=np.int64)
-    CF = np.empty((2, max_menu, N_SF))
-    FT = np.empty((2, max_menu, N_FEAT))
-    SW = np.empty((2, max_menu), dtype=np.int64)
-    W = np.empty((2, max_menu))
-    DUR = np.empty((2, max_menu))
-    KIND = np.empty((2, max_menu), dtype=np.int32)
-    OKIND = np.empty((2, max_menu), dtype=np.int32)
-    ORD = np.empty((2, max_menu), dtype=np.int64)
-    S = np.empty((2, 3))
-    act = np.empty(2, dtype=np.int64)
-    frm = np.empty(2, dtype=np.int64)
-    mask = np.empty(2, dtype=np.int64)
-    stats = np.empty(sim.N_STAT)
+    CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats = _buffers(2, max_menu)
     k = _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, True, 0, False,
                 CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats, count)
     best_j = -1

@@ -30,7 +30,7 @@ from .. import sim
 from ..edge_features import edge_features
 from ..sim import SimTables
 from ..state import to_sample
-from .gametree import _expand
+from .gametree import _buffers, _expand
 from .common import as_style, style_params
 
 
@@ -174,20 +174,7 @@ def static_policy(tables: SimTables, style="infighter", config: StaticConfig = S
 def _act(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, V, r0, r_step, n_r, n_t, gamma, max_menu):
     """Best menu index: one simulated event per action against the dummy, W + gamma * V(landing)
     with V bilinear in (r, theta) (the _bilinear rule)."""
-    CI = np.empty((1, max_menu, sim.N_SI), dtype=np.int64)
-    CF = np.empty((1, max_menu, sim.N_SF))
-    FT = np.empty((1, max_menu, sim.N_FEAT))
-    SW = np.empty((1, max_menu), dtype=np.int64)
-    W = np.empty((1, max_menu))
-    DUR = np.empty((1, max_menu))
-    KIND = np.empty((1, max_menu), dtype=np.int32)
-    OKIND = np.empty((1, max_menu), dtype=np.int32)
-    ORD = np.empty((1, max_menu), dtype=np.int64)
-    S = np.empty((2, 3))
-    act = np.empty(2, dtype=np.int64)
-    frm = np.empty(2, dtype=np.int64)
-    mask = np.empty(2, dtype=np.int64)
-    stats = np.empty(sim.N_STAT)
+    CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats = _buffers(1, max_menu)
     count = np.zeros(2, dtype=np.int64)
     k = _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, True, 0, False, CI, CF, FT, SW, W, DUR, KIND,
                 OKIND, ORD, S, act, frm, mask, stats, count)

@@ -35,12 +35,13 @@ snapped onto the state; an IGAgent snaps only after table answers (``Decision.ed
 every answer of whoever decides next, the opponent minimising) and uses the graph's values only
 at the leaves (agents.gametree._search_graph_leaves): a game-tree search of depth 2 with the
 Interaction Graph as its evaluation function. Measured on the default CMU boxing graph with
-``igraph-fight evaluate`` (infighter, 20 bouts of 60 s, seed 0): IG(5)+exact2 scores +5.2 per
-bout against the exact depth-2 game tree and +0.5 against depth 3 (held-out seed 100, 10 bouts:
-+5.6 and +1.9), where IG(5)'s table answer scores -4.3 and -7.9; the same two exact plies with
-zero leaf values scored +1.3 and -6.6 (10 bouts, seed 0): the graph's values carry the gain. It
-costs 0.4 ms (p50) to 2 ms (p99) of CPU a decision instead of microseconds (the depth-3 game
-tree: 3-4 ms).
+``igraph-fight evaluate`` (infighter, 20 bouts of 60 s, seed 0): IG(5)+exact2 scores +7.2 per
+bout against the exact depth-2 game tree and -0.6 (interval -2.1 to +0.9) against depth 3
+(held-out seed 100, 10 bouts: +5.0 and -0.8), where IG(5)'s table answer scores -3.4 and -7.3.
+benchmarks/exact2_ablation.py (10 bouts, the graph of 512 seed bouts): the same two exact plies
+with zero leaf values score +1.3 and -6.6 against exact2's +6.0 and -0.1: the graph's values
+carry the gain. It costs 0.4 ms (p50) to 2 ms (p99) of CPU a decision instead of microseconds
+(the depth-3 game tree: 3-4 ms).
 
 The policy table is an immutable object; ``set_style``/``set_depth`` build a new one in a worker
 thread while the old one keeps answering, then replace the reference in one assignment, so a

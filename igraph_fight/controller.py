@@ -112,6 +112,7 @@ class _Table:
     version: int
     style_obj: Style
     la: tuple = ()           # what the off-graph lookahead kernel reads (values, kind preferences, weights)
+    style_params: np.ndarray | None = None  # the style as the game-tree kernels read it (exact2)
 
 
 # ----- nearest-state index -------------------------------------------------------------------
@@ -798,7 +799,8 @@ class NPCController:
         be = pol.best_me.astype(np.int64)
         best_ea = np.ascontiguousarray(np.stack([be, np.where(be >= 0, self._edge_action[np.maximum(be, 0)], -1)],
                                                 axis=1))
-        return _Table(pol, best_ea, q, style.name, depth, v, style, la)
+        from .agents.common import style_params
+        return _Table(pol, best_ea, q, style.name, depth, v, style, la, style_params(style))
 
     @property
     def style(self) -> str:
@@ -844,16 +846,15 @@ class NPCController:
 
     def _exact2(self, table: _Table, obs: Observation) -> tuple[int, float]:
         """Two exact plies + the graph's values at the leaves (``first_ply="exact2"``)."""
-        from .agents.common import style_params
         from .agents.gametree import _search_graph_leaves
         if self._menu_off[obs.m_self + 1] <= self._menu_off[obs.m_self]:
             return -1, 0.0
         si = np.array([obs.m_self, obs.m_other, obs.f_other, obs.mask_other], dtype=np.int64)
         sf = np.array([obs.r, obs.theta_self, obs.theta_other], dtype=np.float64)
-        P = style_params(table.style_obj)
-        j, q = _search_graph_leaves(self._T, self._menu_off, self._menu_ids, self._kinds32, P, table.la[2],
-                                    float(self.tables.fps), si, sf, self._max_menu, self._count, float(table.la[3][8]),
-                                    self._pi, self._pf, self._pc, table.la[0], table.la[1])
+        V_me, V_opp, pref, rw = table.la
+        j, q = _search_graph_leaves(self._T, self._menu_off, self._menu_ids, self._kinds32, table.style_params, pref,
+                                    float(self.tables.fps), si, sf, self._max_menu, self._count, float(rw[8]),
+                                    self._pi, self._pf, self._pc, V_me, V_opp)
         if j < 0:
             return -1, 0.0
         return int(self._menu_ids[self._menu_off[obs.m_self] + j]), float(q)

@@ -43,6 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .state import to_sample
+
 PAPER = {  # Table 1 of Shum, Komura & Yamazaki 2008, rows IG(1), IG(3), IG(5) (DESIGN.md section 7)
     "human": {1: -15, 3: 23, 5: 28},
     "static": {1: 34, 3: 54, 5: 55},
@@ -198,14 +200,17 @@ class _Watch:
 
     def step(self, state, player) -> int:
         if self.coverage:
-            s, _, within = self.graph.locate(state.game.tables, state.world, player)
+            tables = state.game.tables
+            si, sf = to_sample(tables, state.world, player)
+            live = (int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]), float(sf[1]),
+                    float(sf[2]))
+            s, _, within = self.graph.nearest_state(*live)
             self.cov_n += 1
             self.cov_in += int(within)
-            self.cov_any += int(within or self.graph.covers_live(state.game.tables, state.world, player))
+            self.cov_any += int(within or self.graph.covers(*live))
             self.cov_nogroup += int(s < 0)
         q = None
         if self.regret is not None and self.regret_every and self.n % self.regret_every == 0:
-            from .state import to_sample
             acts, q = self.regret.root_q(*to_sample(state.game.tables, state.world, player))
             off0 = self.agent.off_graph
             self._fidelity(state, player, int(acts[int(np.argmax(q))]), len(acts))
@@ -231,7 +236,6 @@ class _Watch:
         from . import sim
         from .controller import observe
         from .edge_features import edge_features
-        from .state import to_sample
         c = self.agent.controller
         d = c.act(observe(state, player))
         if d.off_graph or d.state < 0:

@@ -249,13 +249,6 @@ class InteractionGraph:
         return self.nearest_state(int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]),
                                   float(sf[1]), float(sf[2]))
 
-    def covers_live(self, tables, world, who: int) -> bool:
-        """covers() for avatar ``who`` of a live world at its decision instant."""
-        from .state import to_sample
-        si, sf = to_sample(tables, world, who)
-        return self.covers(int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]),
-                           float(sf[1]), float(sf[2]))
-
     # ----- summaries ------------------------------------------------------------------------
     def info(self) -> dict:
         """States, edges, groups, degree histogram, snapping, dead ends, content hash."""

@@ -17,7 +17,6 @@ import numpy as np
 
 from .sim import N_SF, N_SI, SimTables
 
-
 SEED_PAIRINGS = ("human", "random")
 
 
@@ -53,12 +52,11 @@ def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float, s
             sf_rows.append(np.asarray(sf, dtype=np.float64))
             return self.agent.step(state, player)
 
+    # one pair of agents for all bouts: run_bout resets them (generator, what they saw) each time
+    fighters = [_Recorder(HumanProxyAgent()), _Recorder(HumanProxyAgent() if pairing == "human" else RandomAgent())]
     rng = np.random.default_rng(seed)
     for i in range(n_bouts):
-        pair = [_Recorder(HumanProxyAgent()),
-                _Recorder(HumanProxyAgent() if pairing == "human" else RandomAgent())]
-        if i % 2:
-            pair.reverse()
+        pair = fighters[::-1] if i % 2 else fighters
         run_bout(game, pair, seconds, np.random.default_rng(rng.integers(1 << 62)))
     if not si_rows:
         return np.zeros((0, N_SI), dtype=np.int64), np.zeros((0, N_SF), dtype=np.float64)

@@ -22,7 +22,9 @@ fine-tune the result afterwards (TrainConfig.algo = "ppo" on resume).
 from __future__ import annotations
 
 import math
+import os
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -191,6 +193,32 @@ class LabelBuffer:
 
     def __len__(self) -> int:
         return 0 if self.obs is None else len(self.obs)
+
+    def save(self, path) -> None:
+        """Write the labels to ``path`` (.npz) atomically (a resumed run continues with them)."""
+        if self.obs is None:
+            return
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, obs=self.obs, act=self.act, w=self.w)
+        os.replace(tmp, path)
+
+    def load(self, path, obs_dim: int, act_dim: int) -> bool:
+        """Add the labels saved at ``path`` when their shapes fit this run; True when loaded."""
+        if not Path(path).is_file():
+            return False
+        with np.load(path) as z:
+            obs, act, w = z["obs"], z["act"], z["w"]
+        if obs.ndim != 2 or obs.shape[1] != obs_dim or act.shape[1:] != (act_dim,) or len(obs) != len(w):
+            return False
+        self.add(obs, act, w)
+        return True
+
+
+def labels_path(ckpt) -> Path:
+    """Where the label buffer of a checkpoint is kept: CKPT.labels.npz beside it."""
+    ckpt = Path(ckpt)
+    return ckpt.with_name(ckpt.name + ".labels.npz")
 
 
 def distill(learner, buf: LabelBuffer, steps: int, minibatch: int, seed: int) -> dict:

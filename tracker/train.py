@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from .balance import N_BALANCE_ACTIONS, structured_offsets
-from .imitation import LabelBuffer, distill, search_labels, teacher_labels
+from .imitation import LabelBuffer, distill, labels_path, search_labels, teacher_labels
 from .policy import Actor, Critic, RunningNorm, library_fingerprint, load_checkpoint, policy_observation
 
 
@@ -143,6 +143,9 @@ class Worker:
         from .walks import walk_source
 
         torch.set_num_threads(1)
+        # the exploration noise (torch.randn_like in collect) comes from torch's global generator:
+        # seed it here, or a forked worker would inherit whatever state its parent process had
+        torch.manual_seed(int(np.random.SeedSequence([seed, wid]).generate_state(1)[0]))
         self.cfg = cfg
         self.rng = np.random.default_rng([seed, wid])
         self.src = walk_source(library)
@@ -718,6 +721,11 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
             from tqdm import tqdm
             bar = tqdm(total=int(minutes * 60), unit="s", desc="train", dynamic_ncols=True)
         buf = LabelBuffer(cfg.replay_labels)
+        if resume and cfg.algo in ("search", "teacher"):
+            if buf.load(labels_path(resume), obs_dim, act_dim):
+                log(f"resumed {len(buf)} labels from {labels_path(resume)}")
+            else:   # the first iterations distil on a few hundred new labels only
+                log(f"warning: no labels at {labels_path(resume)}; the buffer starts empty")
         it = 0
         stop = _StopFlag()
         while (time.time() - t_start < minutes * 60 and (max_iterations is None or it < max_iterations)
@@ -759,10 +767,12 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
             if time.time() - t_ckpt > cfg.ckpt_every_min * 60:
                 _account(budget, t_start, main_cpu0)
                 save_checkpoint(out, learner, cfg, lib_fp, budget, history)
+                buf.save(labels_path(out))
                 plot_curve(history, Path(out).with_suffix(".png"), _title(budget))
                 t_ckpt = time.time()
         _account(budget, t_start, main_cpu0)
         save_checkpoint(out, learner, cfg, lib_fp, budget, history)
+        buf.save(labels_path(out))
         plot_curve(history, Path(out).with_suffix(".png"), _title(budget))
         if bar is not None:
             bar.close()

@@ -119,7 +119,7 @@ class TrainConfig:
     # bookkeeping
     ckpt_every_min: float = 5.0
     eval_every_min: float = 10.0      # validation walks (deterministic policy, no noise), 0 = never
-    eval_walks: int = 6
+    eval_walks: int = 20
     eval_actions: int = 20
     eval_seed: int = 100              # disjoint from the reported evaluation's seed 0
 
@@ -274,15 +274,20 @@ class Worker:
 
     def evaluate(self, actor_state: dict, norm_state: dict, walk_ids: list[int]) -> list[tuple]:
         """Run validation walks (tracker.evaluate.run_walk) with the deterministic policy:
-        [(walk index, time tracked s, fell, mpjpe m)]."""
+        [(walk index, time tracked s, fell, mpjpe m, PD-only time tracked s)]; the PD-only run of a
+        walk is done once per worker and kept."""
         from .evaluate import draw_walks, run_walk
         from .policy import LearnedController
         ctrl = LearnedController({"policy": actor_state, **norm_state, "config": asdict(self.cfg)})
         walks = draw_walks(self.src, self.cfg.eval_walks, self.cfg.eval_actions, self.cfg.eval_seed)
+        if not hasattr(self, "pd_eval"):
+            self.pd_eval = {}
         out = []
         for i in walk_ids:
+            if i not in self.pd_eval:
+                self.pd_eval[i] = run_walk(self.setup, self.pd, walks[i]).time_s
             r = run_walk(self.setup, ctrl, walks[i])
-            out.append((i, r.time_s, r.fell, r.mpjpe_m))
+            out.append((i, r.time_s, r.fell, r.mpjpe_m, self.pd_eval[i]))
         return out
 
     def _push(self, i: int, env) -> None:
@@ -589,7 +594,8 @@ def validate(pipes, learner: Learner, cfg: TrainConfig) -> tuple[dict, list[floa
         c.send(("eval", state, norm, list(range(k, cfg.eval_walks, len(pipes)))))
     msgs = [_recv(c) for c in pipes]
     res = [r for m in msgs for r in m[1]]
-    return {"eval_ttf_s": float(np.mean([r[1] for r in res])), "eval_completion": float(np.mean([not r[2] for r in res])),
+    return {"eval_ttf_s": float(np.mean([r[1] for r in res])), "eval_pd_ttf_s": float(np.mean([r[4] for r in res])),
+            "eval_completion": float(np.mean([not r[2] for r in res])),
             "eval_mpjpe_m": float(np.mean([r[3] for r in res]))}, [m[2] for m in msgs]
 
 
@@ -636,7 +642,10 @@ def plot_curve(history: list, path: str | os.PathLike, title: str = "") -> None:
     ax[1].plot(x, _smooth(h["mtbf_s"]), lw=1.5)
     if "eval_ttf_s" in h and np.isfinite(h["eval_ttf_s"]).any():
         ok = np.isfinite(h["eval_ttf_s"])
-        ax[1].plot(x[ok], h["eval_ttf_s"][ok], "o-", label="eval walks: mean time to fall")
+        ax[1].plot(x[ok], h["eval_ttf_s"][ok], "o-", label="validation walks: mean time to fall")
+        if "eval_pd_ttf_s" in h and np.isfinite(h["eval_pd_ttf_s"]).any():
+            pd_ok = np.isfinite(h["eval_pd_ttf_s"])
+            ax[1].plot(x[pd_ok], h["eval_pd_ttf_s"][pd_ok], "k--", lw=1, label="the same walks, PD only")
     ax[1].set_xlabel("samples (M)")
     ax[1].set_ylabel("mean time between falls (s)")
     ax[1].set_yscale("log")
@@ -755,14 +764,15 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
                     f"mtbf {_smooth(np.array([h['mtbf_s'] for h in history[-10:]]), 10)[-1]:.2f}s "
                     f"ep {row['ep_len_s']:.2f}s wall {row['wall_s']:.0f}s ({row['iter_s']:.1f}s/it) "
                     + " ".join(f"{k} {row[k]:.4g}" for k in ("kl", "std", "gain", "distill_loss", "labels") if k in row))
-            if cfg.eval_every_min > 0 and (time.time() - t_eval > cfg.eval_every_min * 60 or it == 1 and not ck):
+            if cfg.eval_every_min > 0 and (time.time() - t_eval > cfg.eval_every_min * 60 or it == 1):
                 val, cpus = validate(pipes, learner, cfg)
                 budget["cpu_s"] += float(sum(c - w for c, w in zip(cpus, worker_cpu)))
                 worker_cpu = cpus
                 row.update(val)
                 t_eval = time.time()
                 log(f"validation: {cfg.eval_walks} walks x {cfg.eval_actions} actions: mean time to fall "
-                    f"{row['eval_ttf_s']:.2f}s, completed {100 * row['eval_completion']:.0f}%, "
+                    f"{row['eval_ttf_s']:.2f}s (PD only {row['eval_pd_ttf_s']:.2f}s), "
+                    f"completed {100 * row['eval_completion']:.0f}%, "
                     f"mpjpe {100 * row['eval_mpjpe_m']:.1f}cm")
             if time.time() - t_ckpt > cfg.ckpt_every_min * 60:
                 _account(budget, t_start, main_cpu0)

@@ -69,7 +69,8 @@ import mujoco
 import numpy as np
 
 from .env import EnvConfig, TrackingEnv, _heading, _wrap
-from .model import EFFECTOR_LABELS, TARGET_LABELS, FighterScene, ModelOptions, build_fighter_scene
+from .judging import HitJudge
+from .model import FighterScene, ModelOptions, build_fighter_scene
 from .bout_media import _load_average, write_physics_artifacts
 from .reference import FootPenetration, Reference, build_reference
 
@@ -434,42 +435,10 @@ class PhysicsBout:
         self.lead = int(max(self.env.config.obs_future))
         self.nf = np.asarray(self.tables.n_frames, dtype=np.int64)
         self.fms = setup.scene.fighters
-        self._geom_tables()
+        self.judge = HitJudge(self.model, self.fms, self.lib, config)
         self._trace_tables = None
         self.schedule: list[tuple[float, Callable[[], None], str]] = []
         self.hook_gap_m = 0.5
-
-    # ------------------------------------------------------------------ static tables
-    def _geom_tables(self) -> None:
-        m = self.model
-        self.fist_owner = np.full(m.ngeom, -1, dtype=np.int64)
-        self.fist_side = np.full(m.ngeom, -1, dtype=np.int64)
-        self.target_owner = np.full(m.ngeom, -1, dtype=np.int64)
-        self.target_kind = np.full(m.ngeom, -1, dtype=np.int64)
-        self.fist_geoms, self.target_geoms = [], []
-        for f in self.fms:
-            fg, tg = [], []
-            for side, lab in enumerate(EFFECTOR_LABELS):
-                for g in f.geom_label.get(lab, []):
-                    self.fist_owner[g] = f.index
-                    self.fist_side[g] = side
-                    fg.append(int(g))
-            for j, lab in enumerate(TARGET_LABELS):
-                for g in f.geom_label.get(lab, []):
-                    self.target_owner[g] = f.index
-                    self.target_kind[g] = j
-                    tg.append(int(g))
-            self.fist_geoms.append(np.array(fg, dtype=np.int64))
-            self.target_geoms.append(np.array(tg, dtype=np.int64))
-        self._fist_geo = [(g, m.geom_size[g, 0].copy()) for g in self.fist_geoms]
-        cap = mujoco.mjtGeom.mjGEOM_CAPSULE
-        self._target_geo = [(g, m.geom_size[g, 0].copy(), np.where(m.geom_type[g] == cap, m.geom_size[g, 1], 0.0))
-                            for g in self.target_geoms]
-        # strike effector joint -> fist side (0 left, 1 right, -1 other)
-        parts = self.lib.parts
-        side_of = {parts.get("l_fist", -9): 0, parts.get("l_wrist", -9): 0, parts.get("r_fist", -9): 1,
-                   parts.get("r_wrist", -9): 1}
-        self.strike_side = np.array([side_of.get(int(j), -1) for j in self.lib.strike_joint], dtype=np.int64)
 
     # ------------------------------------------------------------------ run
     def run(self, seed: int = 0, initial=None, progress: bool = False) -> PhysicsBoutResult:
@@ -509,8 +478,7 @@ class PhysicsBout:
         self.notes: list[dict] = []
         self.last_decider = -1
         self.damage = np.zeros(2)
-        self._step_force = np.zeros(2)       # max over substeps of the clipped force given (this step)
-        self._sub_hits: list[tuple] = []     # (attacker, side, defender, target kind, force) this step
+        self.judge.clear()
         self._prev_v = [None, None]
         self._gap = 0.0
         self._pending = sorted(self.schedule, key=lambda x: x[0])
@@ -549,14 +517,13 @@ class PhysicsBout:
                 act = np.array(act, dtype=np.float64, copy=True)
                 k_ref = min(env.t + env.config.target_lead, env.t_end)
                 act[sl] = (0.0 if env.config.residual_actions else f.ref.ctrl[k_ref])
-        self._sub_hits.clear()
-        self._step_force[:] = 0.0
+        self.judge.clear()
         if before_physics is not None:
             before_physics(self)
             self._gap = 0.0
         # contacts are read every substep only when a fist is near a target (a fist moves less
         # than ``hook_gap_m`` in one control step)
-        env.substep_hook = self._substep if self._gap < self.hook_gap_m else None
+        env.substep_hook = self.judge.substep if self._gap < self.hook_gap_m else None
         obs, _, _, info = env.step(act)
         t = env.t
         self._after_step(t, info)
@@ -627,23 +594,8 @@ class PhysicsBout:
             v = d.qvel[c.qvel.start:c.qvel.start + 2]
             out += [d.xpos[c.pelvis, 2], R[2, 0], R[2, 1], cy * v[0] + sy * v[1], -sy * v[0] + cy * v[1],
                     float(self.F[j].down)]
-        out += [self._fist_target_distance(k, 1 - k), self._fist_target_distance(1 - k, k)]
+        out += [self.judge.fist_target_distance(self.env.data, k, 1 - k), self.judge.fist_target_distance(self.env.data, 1 - k, k)]
         return np.array(out, dtype=np.float64)
-
-    def _fist_target_distance(self, a: int, b: int) -> float:
-        """Closest distance (m, >= 0) between a's fist spheres and b's head/chest/belly geoms
-        (spheres, or capsules as segments with a radius)."""
-        d = self.env.data
-        fg, fr = self._fist_geo[a]
-        tg, tr, thl = self._target_geo[b]
-        p = d.geom_xpos[fg]                                   # (F, 3)
-        c = d.geom_xpos[tg]                                   # (G, 3)
-        ax = d.geom_xmat[tg][:, [2, 5, 8]]                    # capsule axis (local z) in world
-        rel = p[:, None, :] - c[None, :, :]                   # (F, G, 3)
-        s = np.clip((rel * ax[None]).sum(-1), -thl[None], thl[None])
-        q = rel - s[..., None] * ax[None]
-        dist = np.sqrt((q * q).sum(-1)) - fr[:, None] - tr[None, :]
-        return max(float(dist.min()), 0.0)
 
     # ------------------------------------------------------------------ references
     def _write_segment(self, k: int, t0: int, action: int, prev: int | None, pose: tuple[float, float, float],
@@ -802,76 +754,12 @@ class PhysicsBout:
                         "action": a, "kind": self.lib.labels[a], "strike": j, "inst": insts[i],
                         "frame": int(world.frame[i])})
 
-    # ------------------------------------------------------------------ contacts and hits
-    def _substep(self, d: mujoco.MjData, s: int) -> None:
-        n = d.ncon
-        if n == 0:
-            return
-        g = d.contact.geom[:n]
-        g0, g1 = g[:, 0], g[:, 1]
-        fo0, fo1 = self.fist_owner[g0], self.fist_owner[g1]
-        to0, to1 = self.target_owner[g0], self.target_owner[g1]
-        m1 = (fo0 >= 0) & (to1 >= 0) & (fo0 != to1)
-        m2 = (fo1 >= 0) & (to0 >= 0) & (fo1 != to0)
-        idx = np.nonzero(m1 | m2)[0]
-        if len(idx) == 0:
-            return
-        f6 = np.zeros(6)
-        tot = np.zeros(2)
-        clip = self.config.force_clip_n
-        for i in idx:
-            mujoco.mj_contactForce(self.model, d, int(i), f6)
-            force = abs(float(f6[0]))
-            if m1[i]:
-                fg, tg = int(g0[i]), int(g1[i])
-            else:
-                fg, tg = int(g1[i]), int(g0[i])
-            a = int(self.fist_owner[fg])
-            self._sub_hits.append((a, int(self.fist_side[fg]), int(self.target_owner[tg]), int(self.target_kind[tg]),
-                                   force))
-            tot[a] += min(force, clip)
-        np.maximum(self._step_force, tot, out=self._step_force)
-
     def _after_step(self, t: int, info) -> None:
         """Judge the contacts of the step's substeps (hits, touches), accumulate rewards."""
-        cfg = self.config
-        lib = self.lib
-        touching = [False, False]
-        if self._sub_hits:
-            judged = set()
-            for (a, side, b, tk, force) in self._sub_hits:
-                if self.F[a].down or self.F[b].down or force < cfg.hit_force_n:
-                    continue
-                touching[a] = True
-                if (a, side) in judged:
-                    continue
-                hit = self._strike_for(a, side, t)
-                if hit is None:
-                    continue
-                seg, j = hit
-                judged.add((a, side))
-                bit = 1 << j
-                fa = self.F[a]
-                fa.realised[seg.inst] = fa.realised.get(seg.inst, 0) | bit
-                fa.resolved[seg.inst] = fa.resolved.get(seg.inst, 0) | bit
-                planned = any(p["attacker"] == a and p["inst"] == seg.inst and p["strike"] == j
-                              for p in self.planned_events)
-                self.hit_events.append({"t": round(t / 30.0, 4), "frame": t, "attacker": a, "victim": b,
-                                        "action": seg.action, "kind": lib.labels[seg.action], "strike": j,
-                                        "inst": seg.inst, "target": TARGET_LABELS[tk], "fist": EFFECTOR_LABELS[side],
-                                        "force_n": round(force, 2), "planned": bool(planned)})
-            for a in (0, 1):
-                if touching[a] and not self.F[a].touching and not any(
-                        h["attacker"] == a and h["frame"] == t for h in self.hit_events):
-                    best = max((x for x in self._sub_hits if x[0] == a), key=lambda x: x[4])
-                    self.touch_events.append({"t": round(t / 30.0, 4), "attacker": a, "victim": 1 - a,
-                                              "target": TARGET_LABELS[best[3]], "fist": EFFECTOR_LABELS[best[1]],
-                                              "force_n": round(best[4], 2)})
-        for a in (0, 1):
-            self.F[a].touching = touching[a]
+        self.judge.judge(t, self.F, self.planned_events, self.hit_events, self.touch_events)
         # rewards (per control step, the competitive-sports paper's terms)
         d = self.env.data
-        given = self._step_force if not (self.F[0].down or self.F[1].down) else np.zeros(2)
+        given = self.judge.step_force.copy() if not (self.F[0].down or self.F[1].down) else np.zeros(2)
         self.damage += given
         p0, p1 = self.pelvis_xy(0), self.pelvis_xy(1)
         l = float(np.linalg.norm(p1 - p0))
@@ -891,7 +779,7 @@ class PhysicsBout:
                 acc = (qv - self._prev_v[k]) * self.env.config.control_hz
                 energy = float(kappa * (acc @ acc))
             self._prev_v[k] = qv
-            gap = self._fist_target_distance(k, o)
+            gap = self.judge.fist_target_distance(self.env.data, k, o)
             gaps.append(gap)
             inc = {"match": float(given[k] - given[o]), "given_n": float(given[k]), "received_n": float(given[o]),
                    "close": float(np.exp(-3.0 * gap ** 2)),
@@ -901,28 +789,6 @@ class PhysicsBout:
                 f.reward_total[key] += val
             f.steps_since += 1
         self._gap = min(gaps)
-
-    def _strike_for(self, a: int, side: int, t: int):
-        """(segment, strike index) of a's strike whose (widened) window holds step t and that has not
-        landed yet, for fist ``side``; looks at the current and the previous action instance."""
-        f = self.F[a]
-        lo, hi = self.config.window_slack
-        lib = self.lib
-        segs = [s for s in f.segments[-3:] if s.t0 <= t and not s.hold and s.inst >= 0]
-        for seg in reversed(segs):
-            fr = t - seg.t0
-            a_id = seg.action
-            s0, s1 = int(lib.strike_offsets[a_id]), int(lib.strike_offsets[a_id + 1])
-            done = f.realised.get(seg.inst, 0)
-            for j in range(s1 - s0):
-                k = s0 + j
-                if done >> j & 1:
-                    continue
-                if self.strike_side[k] >= 0 and self.strike_side[k] != side:
-                    continue
-                if int(lib.strike_w0[k]) - lo <= fr < int(lib.strike_w1[k]) + hi:
-                    return seg, j
-        return None
 
     # ------------------------------------------------------------------ falls
     def _falls_and_resets(self, t: int, info) -> bool:

@@ -215,28 +215,17 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
 
 
 def _plot_bout(result: BoutResult, path: Path, title: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from motion_graph.atomic import atomic_write
-
+    from .bout_plot import cumulative_steps, distance_and_hits_figure, save_figure
     tr = result.trace
-    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
-    ax0.plot(tr["t"], tr["distance"], color="#444", lw=1)
-    ax0.set_ylabel("distance (m)")
-    ax0.set_title(f"{title}: {result.names[0]} (A) vs {result.names[1]} (B)")
+    fig, ax0, ax1 = distance_and_hits_figure(tr["t"], tr["distance"], "distance (m)",
+                                             f"{title}: {result.names[0]} (A) vs {result.names[1]} (B)")
     for n in result.notes:
         for ax in (ax0, ax1):
             ax.axvline(n["t"], color="k", ls="--", lw=1)
         ax0.text(n["t"], ax0.get_ylim()[1], " " + n["note"], va="top", fontsize=8)
     for who, col in ((0, "#e4572e"), (1, "#3fa7d6")):
         ts = [h["t"] for h in result.hit_events if h["attacker"] == who]
-        ax1.step([0.0] + ts + [result.seconds], list(range(len(ts) + 1)) + [len(ts)], where="post", color=col,
-                 label=f"hits by {'AB'[who]} ({result.names[who]})")
-    ax1.set_ylabel("cumulative hits")
+        cumulative_steps(ax1, ts, result.seconds, color=col, label=f"hits by {'AB'[who]} ({result.names[who]})")
     ax1.set_xlabel("time (s)")
     ax1.legend(loc="upper left")
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=80))
-    plt.close(fig)
+    save_figure(fig, path)

@@ -67,34 +67,24 @@ def write_physics_artifacts(bout: PhysicsBout, res: PhysicsBoutResult, out: str 
 
 
 def _plot_physics(res: PhysicsBoutResult, path: Path, title: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from motion_graph.atomic import atomic_write
+    from igraph_fight.bout_plot import cumulative_steps, distance_and_hits_figure, save_figure
     tr = res.trace
-    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
-    ax0.plot(tr["t"], tr["distance"], color="#444", lw=1)
-    ax0.set_ylabel("pelvis distance (m)")
-    ax0.set_title(f"{title} (physics): {res.names[0]} (A) vs {res.names[1]} (B), score {res.score:+.0f}")
+    fig, ax0, ax1 = distance_and_hits_figure(
+        tr["t"], tr["distance"], "pelvis distance (m)",
+        f"{title} (physics): {res.names[0]} (A) vs {res.names[1]} (B), score {res.score:+.0f}", height=6.5)
     cols = ("#e4572e", "#3fa7d6")
     for who in (0, 1):
         ts = [h["t"] for h in res.hit_events if h["attacker"] == who]
-        ax1.step([0.0] + ts + [res.seconds], list(range(len(ts) + 1)) + [len(ts)], where="post", color=cols[who],
-                 label=f"realised hits by {'AB'[who]} ({res.names[who]})")
+        cumulative_steps(ax1, ts, res.seconds, color=cols[who], label=f"realised hits by {'AB'[who]} ({res.names[who]})")
         tp = [p["t"] for p in res.planned_events if p["attacker"] == who]
-        ax1.step([0.0] + tp + [res.seconds], list(range(len(tp) + 1)) + [len(tp)], where="post", color=cols[who],
-                 ls="--", lw=1, label=f"planned hits by {'AB'[who]}")
+        cumulative_steps(ax1, tp, res.seconds, color=cols[who], ls="--", lw=1, label=f"planned hits by {'AB'[who]}")
         for f in res.fall_events:
             if f["player"] == who:
                 for ax in (ax0, ax1):
                     ax.axvspan(f["t"], f["reset_t"], color=cols[who], alpha=0.15, lw=0)
-    ax1.set_ylabel("cumulative hits")
     ax1.set_xlabel(f"time (s); shaded: fallen (A {int(res.falls[0])} falls, B {int(res.falls[1])} falls)")
     ax1.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=80))
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def render_bout_video(bout: PhysicsBout, res: PhysicsBoutResult, path: str | os.PathLike, fps: float = 15.0,

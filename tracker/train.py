@@ -633,12 +633,15 @@ def plot_curve(history: list, path: str | os.PathLike, title: str = "") -> None:
     h = {k: np.array([r.get(k, np.nan) for r in history], float) for k in keys}
     x = h["samples"] / 1e6
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-    ax[0].plot(x, h["reward"], lw=0.6, alpha=0.5)
-    ax[0].plot(x, _smooth(h["reward"]), lw=1.5)
+    # PPO: the reward per step; search / teacher runs have none: the search's gain over the plain policy
+    search = not np.isfinite(h["reward"]).any() and "gain" in h
+    left, left_label = (h["gain"], "search gain over the plain policy (return)") if search else (h["reward"], "reward per step")
+    ax[0].plot(x, left, lw=0.6, alpha=0.5)
+    ax[0].plot(x, _smooth(left), lw=1.5)
     ax[0].set_xlabel("samples (M)")
-    ax[0].set_ylabel("reward per step")
+    ax[0].set_ylabel(left_label)
     ax[0].grid(alpha=0.3)
-    ax[1].plot(x, h["mtbf_s"], lw=0.6, alpha=0.5, label="training episodes (RSI)")
+    ax[1].plot(x, h["mtbf_s"], lw=0.6, alpha=0.5, label="search episodes" if search else "training episodes (RSI)")
     ax[1].plot(x, _smooth(h["mtbf_s"]), lw=1.5)
     if "eval_ttf_s" in h and np.isfinite(h["eval_ttf_s"]).any():
         ok = np.isfinite(h["eval_ttf_s"])
@@ -649,6 +652,9 @@ def plot_curve(history: list, path: str | os.PathLike, title: str = "") -> None:
     ax[1].set_xlabel("samples (M)")
     ax[1].set_ylabel("mean time between falls (s)")
     ax[1].set_yscale("log")
+    from matplotlib.ticker import FormatStrFormatter
+    ax[1].yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax[1].yaxis.set_minor_formatter(FormatStrFormatter("%g"))
     ax[1].grid(alpha=0.3)
     ax[1].legend(fontsize=8)
     if title:

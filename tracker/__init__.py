@@ -9,7 +9,8 @@
     policy = load_default_policy()                         # the learned tracker (tracker/policy.py)
     metrics = evaluate_walks(make_setup(LibraryWalks(lib)), policy)
 
-The fall definition lives in tracker.fall; measurements behind the design in tracker/MEASUREMENTS.md.
+The fall definition lives in tracker.fall; measurements behind the design in tracker/MEASUREMENTS.md,
+the learned tracker's routes and their figures in tracker/TRAINING.md.
 """
 import importlib
 

@@ -74,7 +74,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     """Arguments of `tracker train` (here, not in tracker.train, so the CLI starts without torch)."""
     p.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
     p.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
-    p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it")
+    p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it, and for "
+                   "search runs the label buffer (CKPT.labels.npz, reloaded by --resume)")
     p.add_argument("--resume", help="continue from this checkpoint (its config is kept)")
     p.add_argument("--device", default="auto", help="auto (GPU when present, else CPU), cpu or cuda")
     p.add_argument("--workers", type=int, default=2, help="environment processes (default 2: one per core)")

@@ -166,6 +166,7 @@ class Worker:
         self.ep_ret = np.zeros(len(self.envs))
         self.ep_len = np.zeros(len(self.envs), int)
         self.push_left = np.zeros(len(self.envs), int)
+        self.pd_eval: dict[int, float] = {}      # validation walk -> PD-only time tracked (s)
 
     def _new_ref(self):
         from .reference import build_reference
@@ -280,8 +281,6 @@ class Worker:
         from .policy import LearnedController
         ctrl = LearnedController({"policy": actor_state, **norm_state, "config": asdict(self.cfg)})
         walks = draw_walks(self.src, self.cfg.eval_walks, self.cfg.eval_actions, self.cfg.eval_seed)
-        if not hasattr(self, "pd_eval"):
-            self.pd_eval = {}
         out = []
         for i in walk_ids:
             if i not in self.pd_eval:

@@ -1,11 +1,11 @@
 """The learned tracking policy's machinery: a short training run writes a checkpoint that resumes
 with its budget and history accumulated, and the policy runs per fighter in a two-fighter scene;
 a short run of the search route improves the tracking reward from a deliberately wrong start; a
-run does not depend on the caller's random state.
+run does not depend on the caller's random state; the shipped checkpoint outlasts PD-only on the
+protocol's first walks.
 
-Not tested here because it is not achieved yet (issue 7 stays open): a shipped checkpoint that
-outlasts PD-only tracking. The candidates trained so far measured within noise of PD (see
-tracker/MEASUREMENTS.md)."""
+Not tested because not achieved (issue 7 stays open): the acceptance's 5x PD's time to fall (the
+shipped policy reaches about 1.1-1.2x; tracker/TRAINING.md)."""
 from __future__ import annotations
 
 
@@ -145,3 +145,19 @@ def test_training_run_does_not_depend_on_the_callers_random_state(boxing_library
                     log=lambda *a: None)
         runs.append([h["reward"] for h in res["history"]])
     assert runs[0] == runs[1]
+
+
+def test_shipped_checkpoint_outlasts_pd_on_protocol_walks(source):
+    """The shipped policy (tracker/checkpoints/boxing_cmu13.pt) loads by default, runs the first 12
+    walks of the evaluation protocol (seed 0, 20 actions) and keeps the boxer up longer than PD-only
+    on them, on average (measured: see tracker/checkpoints/README.md; far from issue 7's 5x)."""
+    from tracker.evaluate import draw_walks, run_walk
+    from tracker.pd import PDController
+    from tracker.policy import load_default_policy
+    policy = load_default_policy()
+    setup = make_setup(source)
+    walks = draw_walks(source, 12, 20, 0)
+    pd_t = [run_walk(setup, PDController(), w).time_s for w in walks]
+    pol = [run_walk(setup, policy, w) for w in walks]
+    assert all(np.isfinite(r.mpjpe_m) for r in pol)
+    assert np.mean([r.time_s for r in pol]) > np.mean(pd_t), (np.mean([r.time_s for r in pol]), np.mean(pd_t))

@@ -1,0 +1,72 @@
+"""A learned tracker against PD-only on the same walks, paired: time to fall per walk and the
+difference's confidence interval (the protocol of `tracker eval`: random 20-action library walks).
+
+    python benchmarks/tracker_paired.py --ckpt CKPT [--walks 100] [--seed 0] [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tracker.evaluate import draw_walks, make_setup, run_walk  # noqa: E402
+from tracker.pd import PDController  # noqa: E402
+from tracker.policy import load_policy  # noqa: E402
+from tracker.walks import walk_source  # noqa: E402
+
+
+def paired(ckpt: str | None, n_walks: int = 100, n_actions: int = 20, seed: int = 0, library: str | None = None) -> dict:
+    """Mean time to fall of PD and of the policy on the same walks, the paired difference with a
+    95% interval (normal approximation), and the ratio of the means."""
+    src = walk_source(library)
+    setup = make_setup(src)
+    policy = load_policy(ckpt)
+    pd_t, pol_t, pol_err, pd_err = [], [], [], []
+    t0 = time.time()
+    for w in draw_walks(src, n_walks, n_actions, seed):
+        a = run_walk(setup, PDController(), w)
+        b = run_walk(setup, policy, w)
+        pd_t.append(a.time_s)
+        pol_t.append(b.time_s)
+        pd_err.append(a.mpjpe_m)
+        pol_err.append(b.mpjpe_m)
+    pd_t, pol_t = np.array(pd_t), np.array(pol_t)
+    d = pol_t - pd_t
+    half = 1.96 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+    return {"walks": n_walks, "actions": n_actions, "seed": seed, "pd_ttf_s": float(pd_t.mean()),
+            "policy_ttf_s": float(pol_t.mean()), "ratio": float(pol_t.mean() / pd_t.mean()),
+            "diff_s": float(d.mean()), "diff_ci95_s": [float(d.mean() - half), float(d.mean() + half)],
+            "policy_better_walks": int((d > 0).sum()), "policy_worse_walks": int((d < 0).sum()),
+            "pd_mpjpe_cm": 100 * float(np.mean(pd_err)), "policy_mpjpe_cm": 100 * float(np.mean(pol_err)),
+            "wall_s": time.time() - t0}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--ckpt", help="policy checkpoint (default: the shipped one)")
+    ap.add_argument("--library", help="action library file (default: built from the CMU boxing takes)")
+    ap.add_argument("--walks", type=int, default=100)
+    ap.add_argument("--actions", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args(argv)
+    r = paired(a.ckpt, a.walks, a.actions, a.seed, a.library)
+    if a.json:
+        print(json.dumps(r, indent=1))
+    else:
+        print(f"{r['walks']} walks x {r['actions']} actions, seed {r['seed']}: mean time to fall PD {r['pd_ttf_s']:.3f} s, "
+              f"policy {r['policy_ttf_s']:.3f} s ({r['ratio']:.2f}x); paired difference {r['diff_s']:+.3f} s "
+              f"(95% {r['diff_ci95_s'][0]:+.3f} .. {r['diff_ci95_s'][1]:+.3f}); policy longer on {r['policy_better_walks']} "
+              f"walks, shorter on {r['policy_worse_walks']}; MPJPE PD {r['pd_mpjpe_cm']:.1f} cm, policy "
+              f"{r['policy_mpjpe_cm']:.1f} cm ({r['wall_s']:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -594,7 +594,7 @@ class PhysicsBout:
             v = d.qvel[c.qvel.start:c.qvel.start + 2]
             out += [d.xpos[c.pelvis, 2], R[2, 0], R[2, 1], cy * v[0] + sy * v[1], -sy * v[0] + cy * v[1],
                     float(self.F[j].down)]
-        out += [self.judge.fist_target_distance(self.env.data, k, 1 - k), self.judge.fist_target_distance(self.env.data, 1 - k, k)]
+        out += [self.judge.fist_target_distance(d, k, 1 - k), self.judge.fist_target_distance(d, 1 - k, k)]
         return np.array(out, dtype=np.float64)
 
     # ------------------------------------------------------------------ references

@@ -114,10 +114,7 @@ def rebuilt(ref: Reference, scene, f, qpos: np.ndarray, ground_every_frame: bool
 
 def held(ref: Reference, scene, f, k: int, frames: int = 150) -> Reference:
     """Frame k held still for ``frames`` control steps, its lowest foot point on the floor."""
-    q = np.repeat(ref.qpos[k:k + 1], frames, 0)
-    v = np.zeros((frames, f.nv))
-    return rebuilt(Reference(ref.fps, q, v, *ctrl_targets(q, v, f), ref.sites[:1].repeat(frames, 0),
-                             ref.penetration), scene, f, q, ground_every_frame=True)
+    return rebuilt(ref, scene, f, np.repeat(ref.qpos[k:k + 1], frames, 0), ground_every_frame=True)
 
 
 # ---------------------------------------------------------------------------------------------- runs

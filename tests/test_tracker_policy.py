@@ -90,8 +90,6 @@ def test_training_checkpoint_resumes_and_accumulates_budget(boxing_library_file,
     assert any(not torch.equal(ck0["policy"][k], ck["policy"][k]) for k in ck["policy"])
 
 
-
-
 def _offset_start(cfg, library: str, path, offset: float) -> None:
     """A fresh checkpoint of ``cfg`` whose policy adds ``offset`` (rad) to every PD target: a
     deliberately wrong start, so that a short run has a clear improvement to find."""
@@ -123,12 +121,11 @@ def test_short_search_run_improves_the_tracking_reward(boxing_library_file, tmp_
     assert r1 > 1.15 * r0, (r0, r1)
     # the labels are kept beside the checkpoint, so a resumed run distils on them too
     from tracker.imitation import LabelBuffer, labels_path
-    from tracker.policy import load_checkpoint
-    pol = load_checkpoint(ck)["policy"]
-    obs_dim, act_dim = pol["mu.0.weight"].shape[1], pol[[k for k in pol if k.endswith(".bias")][-1]].shape[0]
+    from tracker.policy import load_policy
+    pol = load_policy(ck)
+    obs_dim, act_dim = pol.obs_dim, pol.act_dim
     buf = LabelBuffer(10_000)
     assert buf.load(labels_path(ck), obs_dim, act_dim) and len(buf) == res["history"][-1]["labels"]
-
 
 
 def test_training_run_does_not_depend_on_the_callers_random_state(boxing_library_file, tmp_path):

@@ -8,6 +8,7 @@ PD tracking with the default gains, no force on the root. Results: tracker/TRAIN
     python benchmarks/tracker_probes.py tvlqr     [--walks N]   # time-varying LQR around the reference
     python benchmarks/tracker_probes.py friction  [--walks N]   # PD with other floor / foot friction
     python benchmarks/tracker_probes.py stiff-feet [--walks N]  # held frames with stiffer feet and toes
+    python benchmarks/tracker_probes.py support   [--walks N]   # foot clearance, fall direction, rest pose
 
 - held: a random frame of each walk held still (reference velocity 0, lowest foot point on the
   floor). Reports the time to fall and whether the centre of mass (ground projection) lies inside
@@ -18,6 +19,12 @@ PD tracking with the default gains, no force on the root. Results: tracker/TRAIN
   phases), (d) both.
 - friction: PD on the walks with the sliding friction of the floor and the feet set to 0.25-2.0.
 - stiff-feet: the held frames with the toe gains and torque limits x10 and the ankles' x5.
+- support: (a) the reference's foot clearance: per frame, the height of each foot's lowest contact
+  sphere above the floor (fractions of frames within 1 / 2 / 3 cm, one foot, both, none); (b) the
+  direction of PD's falls: the centre of mass minus the centroid of the foot contact spheres, in
+  the pelvis's facing frame, 10 control steps (0.33 s) before the fall; (c) the calibration's
+  mean pose (every joint at its rest rotation, the stance the model is built around) held still
+  under PD with the default gains and with every gain and torque limit x5 (a near-rigid statue).
 - tvlqr: the dynamics linearised around every reference frame (mujoco.mjd_transitionFD, one
   physics step, composed over the control step's substeps), an affine finite-horizon LQR
   (deviation from the reference, drift term included), its feedback added to the PD targets.
@@ -222,9 +229,75 @@ class ScaledPD(PDController):
         return out
 
 
+def foot_clearance(scene, f, refs: list[Reference]) -> tuple[np.ndarray, np.ndarray]:
+    """(frames,) heights (m) of the left and the right foot's lowest contact sphere above the floor."""
+    m = scene.model
+    d = mujoco.MjData(m)
+    sides = [np.array([g for g in f.geom_label[sd] if m.geom_contype[g] or m.geom_conaffinity[g]]) for sd in ("l_foot", "r_foot")]
+    out = []
+    for ref in refs:
+        for t in range(ref.n_frames):
+            d.qpos[f.qpos_slice] = ref.qpos[t]
+            mujoco.mj_kinematics(m, d)
+            out.append([float((d.geom_xpos[g, 2] - m.geom_size[g, 0]).min()) for g in sides])
+    h = np.array(out)
+    return h[:, 0], h[:, 1]
+
+
+def fall_direction(env, ref: Reference, pd: PDController, before: int = 10) -> tuple[float, np.ndarray]:
+    """PD on ref; (time tracked s, centre of mass minus foot-sphere centroid in the facing frame
+    (x: right-to-left hip line, y: backwards) ``before`` control steps before the fall)."""
+    from tracker.env import _heading
+    f, d = env.scene.fighters[0], env.data
+    c = env._cache[0]
+    env.reset(ref, 0)
+    pd.reset(env)
+    hist = []
+    for _ in range(ref.n_frames - 1):
+        _, _, done, _ = env.step(env.reference_targets())
+        yaw = _heading(d.xmat[f.pelvis_body].reshape(3, 3), c.lateral)
+        v = d.subtree_com[f.pelvis_body][:2] - d.geom_xpos[f.foot_geoms, :2].mean(0)
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        hist.append((cy * v[0] + sy * v[1], -sy * v[0] + cy * v[1]))
+        if done:
+            break
+    return env.sim_time, np.array(hist[max(0, len(hist) - before)])
+
+
+def rest_pose(ref: Reference, scene, f, frames: int = 300) -> Reference:
+    """The calibration's mean pose (every ball joint at its rest rotation) held still, grounded."""
+    m = scene.model
+    q = ref.qpos[:1].copy()
+    for j in range(m.njnt):
+        a = int(m.jnt_qposadr[j]) - f.qpos_adr
+        if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL and 0 <= a < q.shape[1]:
+            q[0, a:a + 4] = (1.0, 0.0, 0.0, 0.0)
+    return rebuilt(ref, scene, f, np.repeat(q, frames, 0), ground_every_frame=True)
+
+
+def support(scene, env, f, refs: list[Reference], pd: PDController) -> None:
+    hl, hr = foot_clearance(scene, f, refs)
+    for th in (0.01, 0.02, 0.03):
+        lo, ro = hl < th, hr < th
+        print(f"reference frames with the foot's lowest point within {th * 100:.0f} cm of the floor: left {lo.mean():.0%}, "
+              f"right {ro.mean():.0%}, both {(lo & ro).mean():.0%}, neither {(~lo & ~ro).mean():.0%}")
+    print(f"median height of the lower foot's lowest point: {np.median(np.minimum(hl, hr)) * 100:.1f} cm "
+          f"({len(hl)} frames)")
+    rows = [fall_direction(env, ref, pd) for ref in refs]
+    v = np.array([r[1] for r in rows])
+    fwd = v[:, 1] < 0
+    print(f"PD falls ({len(rows)} walks, mean time to fall {np.mean([r[0] for r in rows]):.2f} s): 0.33 s before the fall "
+          f"the centre of mass is ahead of the feet in {fwd.mean():.0%} (mean {-v[fwd, 1].mean() * 100:.0f} cm ahead), "
+          f"mean |sideways| {np.abs(v[:, 0]).mean() * 100:.0f} cm")
+    rest = rest_pose(refs[0], scene, f)
+    stiff = ScaledPD({c: 5.0 for c in set(f.act_class)})
+    print(f"mean pose held still: default gains {track(env, rest, pd)[0]:.2f} s, every gain and torque limit x5 "
+          f"{track(env, rest, stiff)[0]:.2f} s (of {rest.n_frames / 30:.0f} s)")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("held", "reference", "tvlqr", "friction", "stiff-feet"))
+    ap.add_argument("what", choices=("held", "reference", "tvlqr", "friction", "stiff-feet", "support"))
     ap.add_argument("--walks", type=int, default=12)
     ap.add_argument("--seed", type=int, default=100)
     a = ap.parse_args(argv)
@@ -238,6 +311,10 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(a.seed)
     rows = []
     t0 = time.time()
+    if a.what == "support":
+        support(scene, env, f, [build_reference(src.sequence_motion(w), scene, 0) for w in draw_walks(src, a.walks, 20, a.seed)], pd)
+        print(f"{a.walks} walks, {time.time() - t0:.0f} s")
+        return 0
     for w in draw_walks(src, a.walks, 20, a.seed):
         ref = build_reference(src.sequence_motion(w), scene, 0)
         if a.what == "friction":

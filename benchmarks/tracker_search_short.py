@@ -19,9 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import torch  # noqa: E402
-
-from tracker.policy import load_checkpoint  # noqa: E402
+from tracker.policy import offset_checkpoint  # noqa: E402
 from tracker.train import TrainConfig, rollout_reward, train  # noqa: E402
 
 CFG = TrainConfig(seed=1, algo="search", n_workers=1, envs_per_worker=1, walks_per_worker=2, walk_actions=3,
@@ -39,11 +37,8 @@ def main(argv=None) -> int:
         start = Path(tmp) / "start.pt"
         train(CFG, None, 30.0, str(start), max_iterations=0, **quiet)
         for offset in (0.0, 0.3):
-            ck = load_checkpoint(start)
-            bias = [k for k in ck["policy"] if k.startswith("mu.") and k.endswith(".bias")][-1]
-            ck["policy"][bias] = torch.full_like(ck["policy"][bias], offset)
             first = Path(tmp) / f"offset{offset}.pt"
-            torch.save(ck, str(first))
+            offset_checkpoint(start, first, offset)
             row = [f"0: {rollout_reward(str(first), None, CFG, starts=3, horizon=30):.4f}"]
             for n in a.iterations:
                 out = Path(tmp) / f"offset{offset}_{n}.pt"

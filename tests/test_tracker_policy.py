@@ -93,13 +93,10 @@ def test_training_checkpoint_resumes_and_accumulates_budget(boxing_library_file,
 def _offset_start(cfg, library: str, path, offset: float) -> None:
     """A fresh checkpoint of ``cfg`` whose policy adds ``offset`` (rad) to every PD target: a
     deliberately wrong start, so that a short run has a clear improvement to find."""
-    from tracker.policy import load_checkpoint
+    from tracker.policy import offset_checkpoint
     from tracker.train import train
     train(cfg, library, 10.0, str(path), max_iterations=0, progress=False, log=lambda *a: None)
-    ck = load_checkpoint(path)
-    last_bias = [k for k in ck["policy"] if k.startswith("mu.") and k.endswith(".bias")][-1]
-    ck["policy"][last_bias] = torch.full_like(ck["policy"][last_bias], offset)
-    torch.save(ck, str(path))
+    offset_checkpoint(path, path, offset)
 
 
 def test_short_search_run_improves_the_tracking_reward(boxing_library_file, tmp_path):

@@ -61,9 +61,9 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, NamedTuple, Protocol
+from typing import Callable
 
 import mujoco
 import numpy as np
@@ -71,11 +71,13 @@ import numpy as np
 from .env import EnvConfig, TrackingEnv, _heading, _wrap
 from .judging import HitJudge
 from .model import FighterScene, ModelOptions, build_fighter_scene
+from .bout_agents import Agent, DecisionContext, IGAgent, MenuAgent, load_tracker, make_agent  # noqa: F401 (re-exported)
 from .bout_media import _load_average, write_physics_artifacts
+from .bout_result import PhysicsBoutResult, zero_reward
 from .reference import FootPenetration, Reference, build_reference
 
 # ----------------------------------------------------------------------------------------------
-# configuration and agents
+# configuration (agents: tracker.bout_agents; results: tracker.bout_result)
 
 
 @dataclass(frozen=True)
@@ -112,76 +114,6 @@ class BoutConfig:
     w_energy: float = 0.001
     w_penalty: float = 30.0
     record_qpos: bool = True
-
-
-class DecisionContext(NamedTuple):
-    """What an agent sees when it must choose (fighter ``k``, at bout time ``t_s`` s).
-
-    obs: the coupled state as igraph_fight.controller.Observation (predicted at the action's end).
-    menu: the legal actions Next(M_self) (library ids). world: the predicted coupled WorldState.
-    features: physical features of the decider and the opponent (PhysicsBout.features).
-    reward: the paper's reward terms accumulated for this fighter since its previous decision.
-    steps: control steps since its previous decision.
-    """
-
-    k: int
-    t_s: float
-    obs: object
-    menu: np.ndarray
-    world: object
-    features: np.ndarray
-    reward: dict
-    steps: int
-
-
-class Agent(Protocol):
-    """An action chooser. Optional: ``finish(k, reward, steps)``, called at the bout's end with the
-    reward terms accumulated since the agent's last decision (learning agents)."""
-
-    name: str
-
-    def reset(self, bout: "PhysicsBout", k: int, rng: np.random.Generator) -> None: ...
-
-    def decide(self, ctx: DecisionContext) -> int: ...
-
-
-class IGAgent:
-    """An Interaction Graph fighter: the NPCController's answer for the live coupled state."""
-
-    def __init__(self, controller, name: str | None = None) -> None:
-        self.controller = controller
-        self.name = name or f"{controller.style}({controller.depth})"
-        self.decisions = 0
-        self.off_graph = 0
-
-    def reset(self, bout, k, rng) -> None:
-        self.decisions = 0
-        self.off_graph = 0
-
-    def decide(self, ctx: DecisionContext) -> int:
-        d = self.controller.act(ctx.obs)
-        self.decisions += 1
-        self.off_graph += int(d.off_graph)
-        return int(d.action)
-
-
-class MenuAgent:
-    """Scripted: a fixed preference list (first legal one wins), else a random legal action."""
-
-    def __init__(self, prefer: list[int] | None = None, name: str = "scripted") -> None:
-        self.prefer = list(prefer or [])
-        self.name = name
-        self.rng = np.random.default_rng(0)
-
-    def reset(self, bout, k, rng) -> None:
-        self.rng = np.random.default_rng(rng.integers(1 << 31))
-
-    def decide(self, ctx: DecisionContext) -> int:
-        menu = set(int(a) for a in ctx.menu)
-        for a in self.prefer:
-            if a in menu:
-                return a
-        return int(self.rng.choice(ctx.menu))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -308,9 +240,9 @@ class _Fighter:
         self.resolved: dict[int, int] = {}   # instance -> strike bits resolved (planned or realised)
         self.realised: dict[int, int] = {}   # instance -> strike bits that landed physically
         self.touching = False
-        self.reward = _zero_reward()
+        self.reward = zero_reward()
         self.steps_since = 0
-        self.reward_total = _zero_reward()
+        self.reward_total = zero_reward()
 
     def segment_at(self, t: int) -> _Segment | None:
         for s in reversed(self.segments):
@@ -325,92 +257,6 @@ class _Fighter:
             return -1, 0, -1
         f = 0 if s.hold else min(t - s.t0, int(nf[s.action]) - 1)
         return s.action, f, s.inst
-
-
-def _zero_reward() -> dict:
-    return {"match": 0.0, "close": 0.0, "facing": 0.0, "energy": 0.0, "fall": 0.0, "given_n": 0.0,
-            "received_n": 0.0}
-
-
-# ----------------------------------------------------------------------------------------------
-# results
-
-
-@dataclass
-class PhysicsBoutResult:
-    """Everything a physics bout produced (times s, distances m, forces N)."""
-
-    names: tuple[str, str]
-    seconds: float
-    seed: int
-    hits: np.ndarray                  # realised hits by A, by B
-    planned: np.ndarray               # planned hits by A, by B
-    planned_realised: np.ndarray      # planned hits that landed, by A, by B
-    planned_standing: np.ndarray      # planned hits due while both fighters stood
-    planned_standing_realised: np.ndarray
-    falls: np.ndarray
-    damage_n: np.ndarray              # clipped fist force given (sum over control steps), by A, by B
-    touches: np.ndarray
-    decisions: list[dict]
-    hit_events: list[dict]
-    planned_events: list[dict]
-    fall_events: list[dict]
-    touch_events: list[dict]
-    notes: list[dict]
-    trace: dict
-    reward: list[dict]
-    wall_s: float
-    sim_s: float
-    tracker: str
-    agents_info: list[dict] = field(default_factory=list)
-
-    @property
-    def score(self) -> float:
-        return float(self.hits[0] - self.hits[1])
-
-    @property
-    def realtime_factor(self) -> float:
-        return self.sim_s / self.wall_s if self.wall_s > 0 else float("nan")
-
-    def summary(self) -> dict:
-        minutes = max(self.seconds / 60.0, 1e-9)
-        p = float(self.planned.sum())
-        ps = float(self.planned_standing.sum())
-        dist = self.trace["distance"]
-        down = np.asarray(self.trace["down"], dtype=bool).reshape(-1, 2)
-        kinds = [{}, {}]
-        for d in self.decisions:
-            kinds[d["player"]][d["kind"]] = kinds[d["player"]].get(d["kind"], 0) + 1
-        share = [{k: v / max(sum(c.values()), 1) for k, v in sorted(c.items())} for c in kinds]
-        return {
-            "a": self.names[0], "b": self.names[1], "seconds": self.seconds, "seed": self.seed, "physics": True,
-            "hits_a": float(self.hits[0]), "hits_b": float(self.hits[1]), "score": self.score,
-            "defended_a": 0.0, "defended_b": 0.0,
-            "mean_distance_m": float(np.mean(dist)) if len(dist) else float("nan"),
-            "decisions_a": sum(1 for d in self.decisions if d["player"] == 0),
-            "decisions_b": sum(1 for d in self.decisions if d["player"] == 1),
-            "kind_share_a": share[0], "kind_share_b": share[1],
-            "falls_a": int(self.falls[0]), "falls_b": int(self.falls[1]),
-            "falls_per_min_a": float(self.falls[0]) / minutes, "falls_per_min_b": float(self.falls[1]) / minutes,
-            "fall_reasons": {r: sum(1 for e in self.fall_events if e["reason"] == r)
-                             for r in sorted({e["reason"] for e in self.fall_events})},
-            "standing_s_a": float((~down[:, 0]).sum()) / 30.0 if len(down) else 0.0,
-            "standing_s_b": float((~down[:, 1]).sum()) / 30.0 if len(down) else 0.0,
-            "planned_hits": p, "planned_hits_a": float(self.planned[0]), "planned_hits_b": float(self.planned[1]),
-            "realised_hits": float(self.hits.sum()),
-            "planned_realised": float(self.planned_realised.sum()),
-            "planned_realised_ratio": float(self.planned_realised.sum()) / p if p else None,
-            "planned_hits_standing": ps,
-            "planned_realised_ratio_standing": float(self.planned_standing_realised.sum()) / ps if ps else None,
-            "unplanned_hits": float(self.hits.sum() - self.planned_realised.sum()),
-            "touches_a": int(self.touches[0]), "touches_b": int(self.touches[1]),
-            "damage_n_a": float(self.damage_n[0]), "damage_n_b": float(self.damage_n[1]),
-            "reward_a": self.reward[0], "reward_b": self.reward[1],
-            "realtime_factor": self.realtime_factor, "wall_s": self.wall_s, "sim_s": self.sim_s,
-            "tracker": self.tracker, "agents": self.agents_info,
-            **{f"off_graph_{'ab'[k]}": (a["off_graph"] / max(a["decisions"], 1)) for k, a in enumerate(self.agents_info)
-               if "off_graph" in a},
-        }
 
 
 # ----------------------------------------------------------------------------------------------
@@ -695,7 +541,7 @@ class PhysicsBout:
             a = int(self.agents[k].decide(ctx))
             if a not in set(int(x) for x in menu):
                 raise ValueError(f"agent {self.agents[k].name} chose {a}, not in Next({int(world.action[k])})")
-            f.reward = _zero_reward()
+            f.reward = zero_reward()
             f.steps_since = 0
             prev = int(world.action[k])
             pose = (float(world.x[k]), float(world.z[k]), float(world.heading[k]))
@@ -957,34 +803,6 @@ def _yaws(q_wxyz: np.ndarray, lateral: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------------------------
 # entry points: `igraph-fight fight --physics ...` and `python -m tracker.bout_cli fight ...`
-
-
-def load_tracker(spec: str | None = None):
-    """The tracking controller: ``"pd"``, a checkpoint path, or None for the shipped learned policy
-    (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing).
-    The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
-    spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
-    if spec == "pd":
-        from .pd import PDController
-        return PDController()
-    from .policy import DEFAULT_CKPT, load_policy
-    if spec is None and not DEFAULT_CKPT.is_file():
-        from .pd import PDController
-        print(f"tracker.bout: no learned tracker at {DEFAULT_CKPT}; tracking with PD "
-              "(give a checkpoint with IGRAPH_FIGHT_TRACKER=PATH)", file=sys.stderr)
-        return PDController()
-    return load_policy(spec)
-
-
-def make_agent(spec: str, graph, library, depth: int, setup: BoutSetup | None = None):
-    """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
-    ``rl`` or ``rl:CKPT`` the physics RL baseline (tracker.physics_rl)."""
-    if spec == "rl" or spec.startswith("rl:"):
-        from .physics_rl import load_rl_agent
-        return load_rl_agent(spec[3:] or None, library)
-    from igraph_fight.controller import NPCController
-    npc = NPCController(graph, library, style=spec, depth=depth)
-    return IGAgent(npc, f"{npc.style}({depth})")
 
 
 def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxer", depth_a: int = 5,

@@ -11,7 +11,8 @@ import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
-    from .bout import PhysicsBout, PhysicsBoutResult
+    from .bout import PhysicsBout
+    from .bout_result import PhysicsBoutResult
 
 
 

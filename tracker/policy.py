@@ -288,6 +288,17 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     return torch.load(str(path), map_location="cpu", weights_only=False)
 
 
+def offset_checkpoint(src: str | os.PathLike, dst: str | os.PathLike, offset_rad: float) -> None:
+    """Write to ``dst`` the checkpoint ``src`` with its policy's output bias set to ``offset_rad``
+    on every joint: a policy that adds that offset to every PD target. A deliberately wrong start
+    for tests and benchmarks of the training loop (it must find a clear improvement)."""
+    from motion_graph.atomic import atomic_write
+    ck = load_checkpoint(src)
+    last_bias = [k for k in ck["policy"] if k.startswith("mu.") and k.endswith(".bias")][-1]
+    ck["policy"][last_bias] = torch.full_like(ck["policy"][last_bias], float(offset_rad))
+    atomic_write(dst, lambda fh: torch.save(ck, fh))
+
+
 def load_policy(path: str | os.PathLike | None = None) -> LearnedController:
     """A LearnedController from a checkpoint file (default: the shipped one)."""
     p = Path(path) if path else DEFAULT_CKPT

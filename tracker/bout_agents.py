@@ -1,0 +1,108 @@
+"""Agents of a physics bout (tracker.bout): what a fighter sees when it must choose its next action
+(DecisionContext), the Agent protocol, the Interaction Graph fighter, a scripted one, and the
+loaders the command line uses (tracking controller, agent from a name)."""
+from __future__ import annotations
+
+import os
+import sys
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+
+class DecisionContext(NamedTuple):
+    """What an agent sees when it must choose (fighter ``k``, at bout time ``t_s`` s).
+
+    obs: the coupled state as igraph_fight.controller.Observation (predicted at the action's end).
+    menu: the legal actions Next(M_self) (library ids). world: the predicted coupled WorldState.
+    features: physical features of the decider and the opponent (PhysicsBout.features).
+    reward: the paper's reward terms accumulated for this fighter since its previous decision.
+    steps: control steps since its previous decision.
+    """
+
+    k: int
+    t_s: float
+    obs: object
+    menu: np.ndarray
+    world: object
+    features: np.ndarray
+    reward: dict
+    steps: int
+
+
+class Agent(Protocol):
+    """An action chooser. Optional: ``finish(k, reward, steps)``, called at the bout's end with the
+    reward terms accumulated since the agent's last decision (learning agents)."""
+
+    name: str
+
+    def reset(self, bout, k: int, rng: np.random.Generator) -> None: ...  # bout: tracker.bout.PhysicsBout
+
+    def decide(self, ctx: DecisionContext) -> int: ...
+
+
+class IGAgent:
+    """An Interaction Graph fighter: the NPCController's answer for the live coupled state."""
+
+    def __init__(self, controller, name: str | None = None) -> None:
+        self.controller = controller
+        self.name = name or f"{controller.style}({controller.depth})"
+        self.decisions = 0
+        self.off_graph = 0
+
+    def reset(self, bout, k, rng) -> None:
+        self.decisions = 0
+        self.off_graph = 0
+
+    def decide(self, ctx: DecisionContext) -> int:
+        d = self.controller.act(ctx.obs)
+        self.decisions += 1
+        self.off_graph += int(d.off_graph)
+        return int(d.action)
+
+
+class MenuAgent:
+    """Scripted: a fixed preference list (first legal one wins), else a random legal action."""
+
+    def __init__(self, prefer: list[int] | None = None, name: str = "scripted") -> None:
+        self.prefer = list(prefer or [])
+        self.name = name
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, bout, k, rng) -> None:
+        self.rng = np.random.default_rng(rng.integers(1 << 31))
+
+    def decide(self, ctx: DecisionContext) -> int:
+        menu = set(int(a) for a in ctx.menu)
+        for a in self.prefer:
+            if a in menu:
+                return a
+        return int(self.rng.choice(ctx.menu))
+
+
+def load_tracker(spec: str | None = None):
+    """The tracking controller: ``"pd"``, a checkpoint path, or None for the shipped learned policy
+    (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing).
+    The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
+    spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
+    if spec == "pd":
+        from .pd import PDController
+        return PDController()
+    from .policy import DEFAULT_CKPT, load_policy
+    if spec is None and not DEFAULT_CKPT.is_file():
+        from .pd import PDController
+        print(f"tracker.bout: no learned tracker at {DEFAULT_CKPT}; tracking with PD "
+              "(give a checkpoint with IGRAPH_FIGHT_TRACKER=PATH)", file=sys.stderr)
+        return PDController()
+    return load_policy(spec)
+
+
+def make_agent(spec: str, graph, library, depth: int, setup=None):
+    """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
+    ``rl`` or ``rl:CKPT`` the physics RL baseline (tracker.physics_rl)."""
+    if spec == "rl" or spec.startswith("rl:"):
+        from .physics_rl import load_rl_agent
+        return load_rl_agent(spec[3:] or None, library)
+    from igraph_fight.controller import NPCController
+    npc = NPCController(graph, library, style=spec, depth=depth)
+    return IGAgent(npc, f"{npc.style}({depth})")

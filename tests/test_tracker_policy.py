@@ -155,3 +155,45 @@ def test_shipped_checkpoint_outlasts_pd_on_protocol_walks(source):
     pol = [run_walk(setup, policy, w) for w in walks]
     assert all(np.isfinite(r.mpjpe_m) for r in pol)
     assert np.mean([r.time_s for r in pol]) > np.mean(pd_t), (np.mean([r.time_s for r in pol]), np.mean(pd_t))
+
+
+def test_search_following_the_policy_labels_the_policys_own_states(boxing_library_file):
+    """follow_policy = 1 (DAgger): the search labels every segment but goes on from the plain
+    policy's state, so the states it visits are exactly those of the deterministic policy rolled
+    alone from the same start; with the default (follow the best candidate) they differ."""
+    import mujoco
+
+    from tracker.imitation import search_labels
+    from tracker.policy import Actor, NumpyMLP, RunningNorm
+    from tracker.train import TrainConfig, Worker
+    finals = {}
+    for follow in (1.0, 0.0):
+        cfg = TrainConfig(seed=2, algo="search", envs_per_worker=1, walks_per_worker=1, walk_actions=3, init_noise=0.0,
+                          hidden=(32, 32), candidates=4, segment=3, lookahead=3, follow_policy=follow)
+        w = Worker(cfg, boxing_library_file, 0, 2)
+        env = w.envs[0]
+        torch.manual_seed(0)
+        actor = Actor(w.obs.shape[1], w.act_dim, cfg.hidden, cfg.init_log_std)
+        with torch.no_grad():
+            actor.mu[-1].bias.normal_(0.0, 0.02)     # a policy that is not just PD
+        norm = RunningNorm(w.obs.shape[1])
+        start = w.search_obs = w._reset(0)
+        w.search_len = 0
+        size = mujoco.mj_stateSize(env.model, mujoco.mjtState.mjSTATE_INTEGRATION)
+        s0 = np.empty(size)
+        mujoco.mj_getState(env.model, env.data, s0, mujoco.mjtState.mjSTATE_INTEGRATION)
+        t0 = env.t
+        out = search_labels(w, actor.state_dict(), norm.state(), 4)
+        assert out["episodes"] == [] and len(out["obs"]) == 12     # 4 segments of 3 steps, no fall
+        finals[follow] = env.data.qpos.copy()
+        # the plain policy from the same start, 12 steps
+        mujoco.mj_setState(env.model, env.data, s0, mujoco.mjtState.mjSTATE_INTEGRATION)
+        env.t, env.done = t0, False
+        mujoco.mj_kinematics(env.model, env.data)
+        o, net = start, NumpyMLP(actor.mu)
+        for _ in range(12):
+            o, _, _, _ = env.step(w.to_residual(env, net(norm(o[None]))[0]))
+            o = w.policy_obs(env, o)
+        finals[f"plain{follow}"] = env.data.qpos.copy()
+    np.testing.assert_allclose(finals[1.0], finals["plain1.0"], atol=1e-5)
+    assert np.abs(finals[0.0] - finals["plain0.0"]).max() > 1e-3

@@ -11,7 +11,9 @@ gradient estimate:
 2. Label the segment's observations with the best candidate's residuals (weight: how much it beat
    the plain policy, plus a floor), continue the episode from the best candidate's state (so the
    search follows, and labels, the states an improved policy reaches: SAMCON with the policy as
-   the sampling mean), and end it at a fall.
+   the sampling mean), and end it at a fall. With TrainConfig.follow_policy = p, a segment goes on
+   from the plain policy's state instead with probability p (DAgger on the policy's own states,
+   where its falls begin; the labels are the same).
 3. The learner regresses the policy on the aggregated labels (a replay of the latest
    ``replay_labels``), then the next round searches around the improved policy (DAgger-style:
    the states come from the policy being trained).
@@ -112,9 +114,13 @@ def search_labels(worker, actor_state: dict, norm_state: dict, n_segments: int) 
                     break
             rets.append(ret)
             deltas.append(delta)
+            if k == 0:
+                after_plain = after
             if best is None or ret > best[0]:
                 best = (ret, seg_obs, seg_pi, after)
         ret_b, seg_obs, seg_pi, after = best
+        if cfg.follow_policy > 0.0 and rng.random() < cfg.follow_policy:
+            after = after_plain     # DAgger: go on from the plain policy's state (the labels are the same)
         # MPPI-style target: the offsets weighted by exp(return / temperature), temperature
         # proportional to the spread of the returns (all from the same state: no state noise)
         R = np.array(rets)

@@ -111,6 +111,7 @@ class TrainConfig:
     search_gamma: float = 0.97
     label_floor: float = 0.02         # label weight = floor + spread of the candidates' returns
     mppi_temp: float = 0.5            # temperature of the offset weights, in units of the returns' std
+    follow_policy: float = 0.0        # chance per segment to go on from the plain policy's state (DAgger)
     search_segments: int = 40         # segments per worker per iteration
     replay_labels: int = 150_000
     distill_steps: int = 150          # minibatches per iteration

@@ -415,6 +415,10 @@ def rollout_reward(ckpt: str, library: str | None, cfg: TrainConfig, run: int = 
 
 
 def _worker_loop(conn, cfg_dict: dict, library: str | None, wid: int, seed: int) -> None:
+    import signal
+    # Ctrl-C reaches the whole process group: only the trainer handles it (it finishes the
+    # iteration, writes the checkpoint and closes the workers), a worker killed here would lose it
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         w = Worker(TrainConfig.from_dict(cfg_dict), library, wid, seed)
         conn.send(("ready", w.obs.shape[1], w.act_dim, time.process_time()))

@@ -8,7 +8,7 @@ PD tracking with the default gains, no force on the root. Results: tracker/TRAIN
     python benchmarks/tracker_probes.py tvlqr     [--walks N]   # time-varying LQR around the reference
     python benchmarks/tracker_probes.py friction  [--walks N]   # PD with other floor / foot friction
     python benchmarks/tracker_probes.py stiff-feet [--walks N]  # held frames with stiffer feet and toes
-    python benchmarks/tracker_probes.py support   [--walks N]   # foot clearance, fall direction, rest pose
+    python benchmarks/tracker_probes.py support   [--walks N]   # foot clearance, fall direction, mean pose
 
 - held: a random frame of each walk held still (reference velocity 0, lowest foot point on the
   floor). Reports the time to fall and whether the centre of mass (ground projection) lies inside

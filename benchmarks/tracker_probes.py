@@ -276,6 +276,7 @@ def rest_pose(ref: Reference, scene, f, frames: int = 300) -> Reference:
 
 
 def support(scene, env, f, refs: list[Reference], pd: PDController) -> None:
+    """Print the reference foot clearance, the direction of PD's falls and the mean pose held still."""
     hl, hr = foot_clearance(scene, f, refs)
     for th in (0.01, 0.02, 0.03):
         lo, ro = hl < th, hr < th

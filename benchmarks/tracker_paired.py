@@ -8,43 +8,19 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracker.evaluate import draw_walks, make_setup, run_walk  # noqa: E402
+from tracker.evaluate import make_setup, paired_comparison  # noqa: E402
 from tracker.pd import PDController  # noqa: E402
 from tracker.policy import load_policy  # noqa: E402
 from tracker.walks import walk_source  # noqa: E402
 
 
 def paired(ckpt: str | None, n_walks: int = 100, n_actions: int = 20, seed: int = 0, library: str | None = None) -> dict:
-    """Mean time to fall of PD and of the policy on the same walks, the paired difference with a
-    95% interval (normal approximation), and the ratio of the means."""
-    src = walk_source(library)
-    setup = make_setup(src)
-    policy = load_policy(ckpt)
-    pd_t, pol_t, pol_err, pd_err = [], [], [], []
-    t0 = time.time()
-    for w in draw_walks(src, n_walks, n_actions, seed):
-        a = run_walk(setup, PDController(), w)
-        b = run_walk(setup, policy, w)
-        pd_t.append(a.time_s)
-        pol_t.append(b.time_s)
-        pd_err.append(a.mpjpe_m)
-        pol_err.append(b.mpjpe_m)
-    pd_t, pol_t = np.array(pd_t), np.array(pol_t)
-    d = pol_t - pd_t
-    half = 1.96 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
-    return {"walks": n_walks, "actions": n_actions, "seed": seed, "pd_ttf_s": float(pd_t.mean()),
-            "policy_ttf_s": float(pol_t.mean()), "ratio": float(pol_t.mean() / pd_t.mean()),
-            "diff_s": float(d.mean()), "diff_ci95_s": [float(d.mean() - half), float(d.mean() + half)],
-            "policy_better_walks": int((d > 0).sum()), "policy_worse_walks": int((d < 0).sum()),
-            "pd_mpjpe_cm": 100 * float(np.mean(pd_err)), "policy_mpjpe_cm": 100 * float(np.mean(pol_err)),
-            "wall_s": time.time() - t0}
+    """tracker.evaluate.paired_comparison of the checkpoint's policy against PD-only."""
+    return paired_comparison(make_setup(walk_source(library)), load_policy(ckpt), PDController(), n_walks, n_actions, seed)
 
 
 def main(argv=None) -> int:

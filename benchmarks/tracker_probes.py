@@ -125,8 +125,9 @@ def held(ref: Reference, scene, f, k: int, frames: int = 150) -> Reference:
 
 
 # ---------------------------------------------------------------------------------------------- runs
-def track(env, ref: Reference, pd: PDController, feedback=None, probe_at: int | None = None):
-    """PD tracking (plus ``feedback(t, data) -> target offsets``); returns (time tracked s, probe)."""
+def track(env, ref: Reference, pd: PDController, feedback=None, probe_at: int | None = None, after_step=None):
+    """PD tracking (plus ``feedback(t, data) -> target offsets``; ``after_step(env)`` called after
+    every control step); returns (time tracked s, probe)."""
     obs = env.reset(ref, 0)
     pd.reset(env)
     probe = None
@@ -135,6 +136,8 @@ def track(env, ref: Reference, pd: PDController, feedback=None, probe_at: int | 
         if feedback is not None:
             u = u + feedback(t, env.data)
         obs, _, done, info = env.step(u)
+        if after_step is not None:
+            after_step(env)
         if probe_at is not None and t + 1 == probe_at:
             probe = com_inside_contacts(env)
         if done:
@@ -249,19 +252,17 @@ def fall_direction(env, ref: Reference, pd: PDController, before: int = 10) -> t
     (x: right-to-left hip line, y: backwards) ``before`` control steps before the fall)."""
     from tracker.env import _heading
     f, d = env.scene.fighters[0], env.data
-    c = env._cache[0]
-    env.reset(ref, 0)
-    pd.reset(env)
+    lateral = env._cache[0].lateral
     hist = []
-    for _ in range(ref.n_frames - 1):
-        _, _, done, _ = env.step(env.reference_targets())
-        yaw = _heading(d.xmat[f.pelvis_body].reshape(3, 3), c.lateral)
+
+    def record(env) -> None:
+        yaw = _heading(d.xmat[f.pelvis_body].reshape(3, 3), lateral)
         v = d.subtree_com[f.pelvis_body][:2] - d.geom_xpos[f.foot_geoms, :2].mean(0)
         cy, sy = np.cos(yaw), np.sin(yaw)
         hist.append((cy * v[0] + sy * v[1], -sy * v[0] + cy * v[1]))
-        if done:
-            break
-    return env.sim_time, np.array(hist[max(0, len(hist) - before)])
+
+    t, _ = track(env, ref, pd, after_step=record)
+    return t, np.array(hist[max(0, len(hist) - before)])
 
 
 def rest_pose(ref: Reference, scene, f, frames: int = 300) -> Reference:

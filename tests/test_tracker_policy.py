@@ -145,16 +145,12 @@ def test_shipped_checkpoint_outlasts_pd_on_protocol_walks(source):
     """The shipped policy (tracker/checkpoints/boxing_cmu13.pt) loads by default, runs the first 12
     walks of the evaluation protocol (seed 0, 20 actions) and keeps the boxer up longer than PD-only
     on them, on average (measured: see tracker/checkpoints/README.md; far from issue 7's 5x)."""
-    from tracker.evaluate import draw_walks, run_walk
+    from tracker.evaluate import paired_comparison
     from tracker.pd import PDController
     from tracker.policy import load_default_policy
-    policy = load_default_policy()
-    setup = make_setup(source)
-    walks = draw_walks(source, 12, 20, 0)
-    pd_t = [run_walk(setup, PDController(), w).time_s for w in walks]
-    pol = [run_walk(setup, policy, w) for w in walks]
-    assert all(np.isfinite(r.mpjpe_m) for r in pol)
-    assert np.mean([r.time_s for r in pol]) > np.mean(pd_t), (np.mean([r.time_s for r in pol]), np.mean(pd_t))
+    r = paired_comparison(make_setup(source), load_default_policy(), PDController(), 12, 20, 0)
+    assert np.isfinite(r["policy_mpjpe_cm"])
+    assert r["policy_ttf_s"] > r["pd_ttf_s"], r
 
 
 def test_search_following_the_policy_labels_the_policys_own_states(boxing_library_file):

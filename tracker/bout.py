@@ -821,7 +821,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     sim_opts = g.header.get("options", {}).get("sim")
     from igraph_fight.sim import SimParams
     setup = BoutSetup.create(lib, sim_params=SimParams(**sim_opts) if sim_opts else None, root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a, setup), make_agent(style_b, g, lib, depth_b, setup)]
+    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
     cfg = config or BoutConfig(seconds=seconds)
     if cfg.seconds != seconds:
@@ -860,7 +860,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     g = load_graph(graph) if not hasattr(graph, "arrays") else graph
     lib = g.load_library()
     setup = BoutSetup.create(lib, root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a, setup), make_agent(style_b, g, lib, depth_b, setup)]
+    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
     rows = []
     for i in range(n_bouts):

@@ -97,7 +97,7 @@ def load_tracker(spec: str | None = None):
     return load_policy(spec)
 
 
-def make_agent(spec: str, graph, library, depth: int, setup=None):
+def make_agent(spec: str, graph, library, depth: int):
     """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
     ``rl`` or ``rl:CKPT`` the physics RL baseline (tracker.physics_rl)."""
     if spec == "rl" or spec.startswith("rl:"):

@@ -128,6 +128,26 @@ def evaluate_walks(setup: EvalSetup, controller: Controller, n_walks: int = 100,
     return summarise(results, controller, setup, n_actions, seed)
 
 
+def paired_comparison(setup: EvalSetup, controller: Controller, baseline: Controller, n_walks: int = 100,
+                      n_actions: int = 20, seed: int = 0) -> dict:
+    """Both controllers on the protocol's same walks: mean time to fall (s) of each, the ratio of
+    the means, the paired difference (controller - baseline) with a 95% interval (normal
+    approximation), on how many walks the controller lasted longer / shorter, and MPJPE (cm)."""
+    t0 = time.time()
+    walks = draw_walks(setup.source, n_walks, n_actions, seed)
+    base = [run_walk(setup, baseline, w) for w in walks]
+    pol = [run_walk(setup, controller, w) for w in walks]
+    base_t, pol_t = np.array([r.time_s for r in base]), np.array([r.time_s for r in pol])
+    d = pol_t - base_t
+    half = 1.96 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+    return {"walks": n_walks, "actions": n_actions, "seed": seed, "pd_ttf_s": float(base_t.mean()),
+            "policy_ttf_s": float(pol_t.mean()), "ratio": float(pol_t.mean() / base_t.mean()),
+            "diff_s": float(d.mean()), "diff_ci95_s": [float(d.mean() - half), float(d.mean() + half)],
+            "policy_better_walks": int((d > 0).sum()), "policy_worse_walks": int((d < 0).sum()),
+            "pd_mpjpe_cm": 100 * float(np.mean([r.mpjpe_m for r in base])),
+            "policy_mpjpe_cm": 100 * float(np.mean([r.mpjpe_m for r in pol])), "wall_s": time.time() - t0}
+
+
 def summarise(results: list[WalkResult], controller: Controller, setup: EvalSetup, n_actions: int, seed: int) -> dict:
     fell = np.array([r.fell for r in results])
     t = np.array([r.time_s for r in results])

@@ -278,7 +278,9 @@ class PhysicsBout:
         self.agents = list(agents)
         self.tracker = tracker
         self.config = config
-        self.lead = int(max(self.env.config.obs_future))
+        # decisions are made this many control steps before an action ends, so the reference the
+        # tracker observes (up to its longest horizon) is always known
+        self.lead = int(max(tuple(self.env.config.obs_future) + tuple(getattr(tracker, "obs_future", ()))))
         self.nf = np.asarray(self.tables.n_frames, dtype=np.int64)
         self.fms = setup.scene.fighters
         self.judge = HitJudge(self.model, self.fms, self.lib, config)

@@ -293,8 +293,9 @@ class TrackingEnv:
         obs = [self.observe(k) for k in range(self.n_fighters)]
         return obs[0] if len(obs) == 1 else np.stack(obs)
 
-    def observe(self, k: int = 0) -> np.ndarray:
-        """Observation of fighter k (see module doc); a flat float64 vector."""
+    def observe(self, k: int = 0, future: tuple[int, ...] | None = None) -> np.ndarray:
+        """Observation of fighter k (see module doc); a flat float64 vector. ``future``: reference
+        horizons (control steps) instead of ``config.obs_future`` (a policy trained with others)."""
         c = self._cache[k]
         r = self.refs[k]
         d = self.data
@@ -311,7 +312,7 @@ class TrackingEnv:
         joints = self.joint_coordinates(k)
         jvel = v[6:]
         parts = [np.array([q[2]]), up, lin, ang, joints, jvel]
-        for h in self.config.obs_future:
+        for h in (self.config.obs_future if future is None else future):
             kf = min(self.t + h, self.t_end)
             parts.append(r.ctrl[kf] - joints)
             parts.append(Ry @ (r.qpos[kf, :3] - q[:3]))

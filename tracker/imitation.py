@@ -209,12 +209,15 @@ class LabelBuffer:
         np.savez(tmp, obs=self.obs, act=self.act, w=self.w)
         os.replace(tmp, path)
 
-    def load(self, path, obs_dim: int, act_dim: int) -> bool:
-        """Add the labels saved at ``path`` when their shapes fit this run; True when loaded."""
+    def load(self, path, obs_dim: int, act_dim: int, transform=None) -> bool:
+        """Add the labels saved at ``path`` when their shapes fit this run; True when loaded.
+        ``transform``: applied to the stored observations first (tracker.widen.widen_labels)."""
         if not Path(path).is_file():
             return False
         with np.load(path) as z:
             obs, act, w = z["obs"], z["act"], z["w"]
+        if transform is not None and obs.ndim == 2:
+            obs = transform(obs)
         if obs.ndim != 2 or obs.shape[1] != obs_dim or act.shape[1:] != (act_dim,) or len(obs) != len(w):
             return False
         self.add(obs, act, w)

@@ -242,6 +242,7 @@ class LearnedController:
         self.action_clip = float(cfg.get("action_clip", 1.0))
         self.balance = bool(cfg.get("balance_obs", False))
         self.action_space = cfg.get("action_space", "joints")
+        self.obs_future = tuple(cfg.get("obs_future", (1, 2, 4)))   # reference horizons it was trained with
         self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets") if k in cfg})
 
     # ---------------------------------------------------------------- Controller interface
@@ -261,7 +262,11 @@ class LearnedController:
         return np.clip(self.net(self.norm(x)), -self.action_clip, self.action_clip)
 
     def act(self, env, obs: np.ndarray) -> np.ndarray:
-        """``obs``: the env's observation (one fighter: (D,), several: (n, D)); balance features are added here."""
+        """``obs``: the env's observation (one fighter: (D,), several: (n, D)); balance features are added here.
+        When the env observes other reference horizons than the policy was trained with, the
+        observation is rebuilt with the policy's."""
+        if tuple(env.config.obs_future) != self.obs_future:
+            obs = np.stack([env.observe(k, self.obs_future) for k in range(env.n_fighters)])
         if self.balance:
             obs = policy_observation(env, obs)
         a = self.residual(obs)

@@ -78,6 +78,8 @@ class TrainConfig:
     # policy
     action_space: str = "joints"      # "joints": residual per actuator; "balance": tracker.balance.structured_offsets
     balance_obs: bool = True          # add tracker.policy.balance_features to the observation
+    obs_future: tuple[int, ...] = (1, 2, 4)     # control steps ahead at which the reference is observed;
+                                                # --resume with more horizons widens the policy (tracker.widen)
     hidden: tuple[int, ...] = (128, 128)        # actor (small: the gradient noise of a wide net swamps the signal)
     critic_hidden: tuple[int, ...] = (256, 256)
     init_log_std: float = -3.0        # exp(-3) = 0.05 rad exploration (0.135 measured worse at the start)
@@ -150,7 +152,7 @@ class Worker:
         self.cfg = cfg
         self.rng = np.random.default_rng([seed, wid])
         self.src = walk_source(library)
-        env_cfg = EnvConfig(residual_actions=True, init_noise=cfg.init_noise)
+        env_cfg = EnvConfig(residual_actions=True, init_noise=cfg.init_noise, obs_future=tuple(cfg.obs_future))
         self.setup = make_setup(self.src, ModelOptions(physics_hz=cfg.physics_hz), env_cfg)
         self.scene = self.setup.scene
         self.envs = [TrackingEnv(self.scene, env_cfg) for _ in range(cfg.envs_per_worker)]
@@ -686,7 +688,7 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
     # One thread: on a shared 2-core machine torch's thread pool oversubscribes the cores
     # (measured: 830 ms vs 55 ms per minibatch with 2 threads vs 1 while the workers run).
     torch.set_num_threads(1)
-    ck = None
+    ck, widened = None, None
     if resume:
         ck = load_checkpoint(resume)
         if "critic_hidden" not in ck["config"] and "value" in ck:
@@ -696,6 +698,13 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
         cfg = TrainConfig.from_dict({**ck["config"], "n_workers": cfg.n_workers, "envs_per_worker": cfg.envs_per_worker,
                                      "ckpt_every_min": cfg.ckpt_every_min, **(overrides or {})})
         log(f"resuming {resume}: {ck['budget']['samples']} samples so far; overrides {overrides or {}}")
+        old_future = tuple(ck["config"].get("obs_future", (1, 2, 4)))
+        if old_future != tuple(cfg.obs_future):
+            from .widen import widen_checkpoint
+            widened = (ck, old_future)
+            ck = widen_checkpoint(ck, tuple(cfg.obs_future))
+            log(f"observation widened: reference horizons {old_future} -> {tuple(cfg.obs_future)} "
+                f"(new inputs start with zero weights; optimiser states restart)")
     budget = dict(ck["budget"]) if ck else {"samples": 0, "cpu_s": 0.0, "wall_s": 0.0, "iterations": 0, "runs": 0}
     history = list(ck["history"]) if ck else []
     budget = {k: v for k, v in budget.items() if not k.startswith("_")}
@@ -741,7 +750,15 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
             bar = tqdm(total=int(minutes * 60), unit="s", desc="train", dynamic_ncols=True)
         buf = LabelBuffer(cfg.replay_labels)
         if resume and cfg.algo in ("search", "teacher"):
-            if buf.load(labels_path(resume), obs_dim, act_dim):
+            transform = None
+            if widened is not None:
+                from .widen import column_map, widen_labels
+                old_ck, old_future = widened
+                src, new = column_map(int(old_ck["policy"]["mu.0.weight"].shape[1]), act_dim, old_future,
+                                      tuple(cfg.obs_future), cfg.balance_obs)
+                mean = np.asarray(ck["obs_mean"], float)
+                transform = lambda o: widen_labels(o, src, new, mean)  # noqa: E731
+            if buf.load(labels_path(resume), obs_dim, act_dim, transform=transform):
                 log(f"resumed {len(buf)} labels from {labels_path(resume)}")
             else:   # the first iterations distil on a few hundred new labels only
                 log(f"warning: no labels at {labels_path(resume)}; the buffer starts empty")

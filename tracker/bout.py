@@ -13,8 +13,8 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   bout seed: distance 1-3 m, random headings, both at the last frame of a guard action), posed in
   physics. Control at 30 Hz (the library rate), physics at 240 Hz.
 * Online references: each fighter's Reference is a buffer over the bout's control steps. When a
-  fighter's action ends (``lead`` = 4 control steps before its last frame, because the tracking
-  policy observes the reference up to 4 steps ahead) its agent chooses the next action from the
+  fighter's action ends (``lead`` control steps before its last frame: the tracking policy's
+  longest reference horizon, 4 steps for the shipped policy) its agent chooses the next action from the
   coupled state *predicted at the action's end*: each fighter's physical pelvis ground position and
   fighting direction now, moved on by its reference's displacement over the remaining steps. The
   fighting direction is the reference's (placement heading + the library path heading at the

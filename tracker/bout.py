@@ -7,6 +7,10 @@ controller (the learned policy, or PD).
     res = bout.run(seed=1)                                  # PhysicsBoutResult
     write_physics_artifacts(bout, res, "out/fight")         # log.jsonl, summary.json, plots, MP4
 
+Set-up, rules and per-fighter bookkeeping: tracker.bout_setup; agents: tracker.bout_agents; the
+result record: tracker.bout_result; entry points (a bout to its artifacts, series):
+tracker.bout_run; media: tracker.bout_media.
+
 Rules (what ``run`` does; every number is a BoutConfig field):
 
 * Start: the kinematic game's random start (igraph_fight.game.FightGame.new_initial_state with the
@@ -57,207 +61,19 @@ Rules (what ``run`` does; every number is a BoutConfig field):
 """
 from __future__ import annotations
 
-import json
-import os
 import sys
 import time
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import mujoco
 import numpy as np
 
-from .env import EnvConfig, TrackingEnv, _heading, _wrap
+from .env import _heading, _wrap
 from .judging import HitJudge
-from .model import FighterScene, ModelOptions, build_fighter_scene
 from .bout_agents import Agent, DecisionContext, IGAgent, MenuAgent, load_tracker, make_agent  # noqa: F401 (re-exported)
-from .bout_media import _load_average, write_physics_artifacts
-from .bout_result import PhysicsBoutResult, zero_reward
-from .reference import FootPenetration, Reference, build_reference
-
-# ----------------------------------------------------------------------------------------------
-# configuration (agents: tracker.bout_agents; results: tracker.bout_result)
-
-
-@dataclass(frozen=True)
-class BoutConfig:
-    """Rules of a physics bout (see the module doc). Times in seconds, distances in metres,
-    forces in newtons, frames at the control rate (= the library rate, 30 Hz).
-
-    Attributes:
-        seconds: bout length.
-        hit_force_n: a fist contact on a target counts from this normal force.
-        force_clip_n: forces are clipped here for the damage sum / match reward.
-        window_slack: (before, after) frames added to a strike window for the physical hit.
-        fall_pause_s: how long a fallen fighter lies before it is reset.
-        reset_min_distance_m: a reset fighter is put at least this far (pelvis ground distance)
-            from the opponent.
-        blend_frames: pose blend from the previous action's end (ActionLibrary.sequence_motion).
-        init_distance_m: initial distance range (the kinematic game's).
-        physics_hz: physics rate.
-        w_close, w_facing, w_energy, w_penalty: the competitive-sports paper's reward weights.
-        record_qpos: keep qpos per control step (needed for the video).
-    """
-
-    seconds: float = 60.0
-    hit_force_n: float = 1.0
-    force_clip_n: float = 200.0
-    window_slack: tuple[int, int] = (1, 4)
-    fall_pause_s: float = 1.0
-    reset_min_distance_m: float = 0.6
-    blend_frames: int = 4
-    init_distance_m: tuple[float, float] = (1.0, 3.0)
-    physics_hz: float = 240.0
-    w_close: float = 0.2
-    w_facing: float = 0.05
-    w_energy: float = 0.001
-    w_penalty: float = 30.0
-    record_qpos: bool = True
-
-
-# ----------------------------------------------------------------------------------------------
-# set-up shared by bouts (model, scene, environment)
-
-
-@dataclass
-class BoutSetup:
-    """The fighter model calibrated on the library, the two-fighter scene and its environment;
-    built once and reused by every bout (RL workers run hundreds of bouts on one setup)."""
-
-    library: object
-    scene: FighterScene
-    env: TrackingEnv
-    lift_m: float
-    tables: object          # igraph_fight.sim.SimTables (the kinematic simulator of planned hits)
-    game: object            # igraph_fight.game.FightGame (initial states, guard actions)
-    root_assist: bool = False
-
-    @classmethod
-    def create(cls, library, physics_hz: float = 240.0, sim_params=None, root_assist: bool = False) -> "BoutSetup":
-        """root_assist: hold each pelvis on its reference with a weld (ModelOptions.root_assist):
-        NOT physics (a fighter cannot fall), a labelled diagnostic only."""
-        from igraph_fight.game import FightGame, GameConfig
-        from igraph_fight.sim import SimParams, SimTables
-
-        from .spec import fighter_spec
-        from .walks import LibraryWalks
-        src = LibraryWalks(library)
-        if abs(src.fps - 30.0) > 1e-6:
-            raise ValueError(f"physics bouts need a 30 fps library (control rate), got {src.fps}")
-        spec = fighter_spec(src.skeleton, src.calibration_motions())
-        scene = build_fighter_scene(spec, 2, ModelOptions(physics_hz=physics_hz, root_assist=root_assist))
-        env = TrackingEnv(scene, EnvConfig(terminate_on_fall=False))
-        # One constant lift for every action (per-action "auto" lifts would make the reference
-        # jump vertically at transitions): the lift "auto" finds on the whole library.
-        lift = build_reference(src.calibration_motions()[0], scene, 0, lift="auto").penetration.lift_m
-        sp = sim_params if sim_params is not None else SimParams()
-        tables = SimTables.from_library(library, sp)
-        game = FightGame(library, GameConfig(sim=sp), tables=tables)
-        return cls(library, scene, env, float(lift), tables, game, root_assist)
-
-    def __post_init__(self) -> None:
-        self._refs: dict[int, dict] = {}
-        fm = self.scene.fighters[0]
-        if fm.joint_type != "ball":
-            raise ValueError("physics bouts need ball joints (ModelOptions(joint_type='ball'))")
-        base = fm.qpos_adr
-        self.quat_cols = np.concatenate([np.arange(3, 7)] + [np.arange(a - base, a - base + 4) for a in fm.joint_qpos])
-
-    def action_reference(self, a: int) -> dict:
-        """Reference of action ``a`` alone at the origin placement (frame 0 pelvis on the ground
-        origin, fighting direction 0), lifted by ``lift_m``; cached. Placement-invariant parts
-        (joints, PD targets, balance features in the facing frame) are reused as they are."""
-        c = self._refs.get(a)
-        if c is None:
-            from .policy import _ref_balance
-            mo = self.library.sequence_motion([int(a)], 0)
-            ref = build_reference(mo, self.scene, 0, lift=self.lift_m)
-            try:
-                bal = _ref_balance(self.env, 0, ref)
-            except Exception:  # noqa: BLE001 - torch missing: PD bouts do not need them
-                bal = np.zeros((ref.n_frames, 12))
-            c = {"qpos": ref.qpos, "qvel": ref.qvel, "ctrl": ref.ctrl, "ctrl_vel": ref.ctrl_vel, "sites": ref.sites,
-                 "balance": bal, "yaw": _yaws(ref.qpos[:, 3:7], self.env._cache[0].lateral)}
-            self._refs[a] = c
-        return c
-
-    def sites_of(self, qpos: np.ndarray) -> np.ndarray:
-        """Joint-site world positions (N, S, 3) of qpos rows of one fighter."""
-        fm = self.scene.fighters[0]
-        if not hasattr(self, "_scratch"):
-            self._scratch = mujoco.MjData(self.scene.model)
-        d = self._scratch
-        out = np.zeros((len(qpos), len(fm.site_ids), 3))
-        for i, q in enumerate(qpos):
-            d.qpos[fm.qpos_slice] = q
-            mujoco.mj_kinematics(self.scene.model, d)
-            out[i] = d.site_xpos[fm.site_ids]
-        return out
-
-    def ctrl_of(self, qpos: np.ndarray) -> np.ndarray:
-        """PD position targets (N, n_act) of qpos rows (one fighter): rotation vectors of the joints."""
-        fm = self.scene.fighters[0]
-        base = fm.qpos_adr
-        q = np.stack([qpos[:, a - base:a - base + 4] for a in fm.joint_qpos], axis=1)   # (N, D, 4)
-        w = np.clip(q[..., 0], -1.0, 1.0)
-        v = q[..., 1:]
-        sn = np.linalg.norm(v, axis=-1)
-        ang = 2.0 * np.arctan2(sn, w)
-        ang = np.where(ang > np.pi, ang - 2.0 * np.pi, ang)
-        scale = np.where(sn > 1e-12, ang / np.maximum(sn, 1e-12), 2.0)
-        rv = v * scale[..., None]
-        return rv[:, fm.act_joint, fm.act_axis]
-
-
-# ----------------------------------------------------------------------------------------------
-# per-fighter bookkeeping
-
-
-@dataclass
-class _Segment:
-    t0: int            # control step of the action's frame 0
-    action: int
-    inst: int          # action instance id (per fighter)
-    hold: bool = False  # a fallen fighter's placeholder: frame 0 held
-
-
-class _Fighter:
-    def __init__(self, k: int, T: int, fm, setup: BoutSetup) -> None:
-        self.k = k
-        nq, nv, na, ns = fm.nq, fm.nv, fm.n_act, len(fm.site_ids)
-        pen = FootPenetration.from_depths(np.zeros(1))
-        self.ref = Reference(30.0, np.zeros((T, nq)), np.zeros((T, nv)), np.zeros((T, na)), np.zeros((T, na)),
-                             np.zeros((T, ns, 3)), pen, "physics bout", {f"_balance_f{k}": np.zeros((T, 12))})
-        self.ref.qpos[:, 3] = 1.0
-        self.fight_heading = np.zeros(T)   # reference fighting direction per step (mocap heading, rad)
-        self.ref_yaw = np.zeros(T)         # reference pelvis hip-line yaw (MuJoCo, rad)
-        self.segments: list[_Segment] = []
-        self.t_dec_end = 0                 # last frame of the last planned action
-        self.n_inst = 0
-        self.down = False
-        self.reset_at = -1
-        self.resolved: dict[int, int] = {}   # instance -> strike bits resolved (planned or realised)
-        self.realised: dict[int, int] = {}   # instance -> strike bits that landed physically
-        self.touching = False
-        self.reward = zero_reward()
-        self.steps_since = 0
-        self.reward_total = zero_reward()
-
-    def segment_at(self, t: int) -> _Segment | None:
-        for s in reversed(self.segments):
-            if s.t0 <= t:
-                return s
-        return None
-
-    def action_frame(self, t: int, nf: np.ndarray) -> tuple[int, int, int]:
-        """(action, frame, instance) at control step t (frames clamped to the action's last)."""
-        s = self.segment_at(t)
-        if s is None:
-            return -1, 0, -1
-        f = 0 if s.hold else min(t - s.t0, int(nf[s.action]) - 1)
-        return s.action, f, s.inst
-
+from .bout_result import PhysicsBoutResult, zero_reward  # noqa: F401 (re-exported)
+from .bout_setup import (BoutConfig, BoutSetup, _Fighter, _quat_mul, _Segment, _slerp, _yaw_quat,
+                         _yaw_rot, _yaws)
 
 # ----------------------------------------------------------------------------------------------
 # the bout
@@ -758,136 +574,7 @@ class PhysicsBout:
             getattr(self.tracker, "describe", lambda: getattr(self.tracker, "name", "?"))(), info)
 
 
-# ----------------------------------------------------------------------------------------------
-# helpers
-
-
-def _yaw_rot(h: float) -> np.ndarray:
-    """Rotation by h about MuJoCo's +Z (a mocap heading h is a MuJoCo yaw of +h)."""
-    c, s = np.cos(h), np.sin(h)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _yaw_quat(h: float) -> np.ndarray:
-    return np.array([np.cos(h / 2), 0.0, 0.0, np.sin(h / 2)])
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a (4,) times b (..., 4), quaternions (w, x, y, z)."""
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
-
-
-def _slerp(q_to: np.ndarray, q_from: np.ndarray, w_from: float) -> np.ndarray:
-    """Per-row slerp of unit quaternions (N, 4): weight w_from on q_from (sign-aligned)."""
-    dot = (q_to * q_from).sum(-1)
-    q_from = np.where(dot[:, None] < 0, -q_from, q_from)
-    dot = np.abs(dot).clip(-1.0, 1.0)
-    th = np.arccos(dot)
-    s = np.sin(th)
-    small = s < 1e-6
-    a = np.where(small, 1.0 - w_from, np.sin((1.0 - w_from) * th) / np.where(small, 1.0, s))
-    b = np.where(small, w_from, np.sin(w_from * th) / np.where(small, 1.0, s))
-    q = a[:, None] * q_to + b[:, None] * q_from
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def _yaws(q_wxyz: np.ndarray, lateral: np.ndarray) -> np.ndarray:
-    """Yaw of the body-fixed ``lateral`` direction for each quaternion (w, x, y, z)."""
-    w, x, y, z = q_wxyz[:, 0], q_wxyz[:, 1], q_wxyz[:, 2], q_wxyz[:, 3]
-    lx, ly, lz = lateral
-    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-    return np.arctan2(r10 * lx + r11 * ly + r12 * lz, r00 * lx + r01 * ly + r02 * lz)
-
-
-# ----------------------------------------------------------------------------------------------
-# entry points: `igraph-fight fight --physics ...` and `python -m tracker.bout_cli fight ...`
-
-
-def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxer", depth_a: int = 5,
-                      depth_b: int = 5, seconds: float = 60.0, seed: int = 1, out: str | os.PathLike = "out/fight",
-                      library=None, swap_a: tuple[float, str] | None = None, tracker: str | None = None,
-                      video: bool = True, video_fps: float = 15.0, width: int = 640, height: int = 360,
-                      root_assist: bool = False, progress: bool = False, config: BoutConfig | None = None) -> dict:
-    """One physics bout from a graph file to artifacts (the physics twin of igraph_fight.bouts.run_style_bout).
-    Returns the summary dict (see PhysicsBoutResult.summary, plus ``artifacts``)."""
-    from igraph_fight.graph import load_graph
-    g = load_graph(graph) if not hasattr(graph, "arrays") else graph
-    if library is not None and not hasattr(library, "n_actions"):
-        from motion_graph.library import load_library
-        library = load_library(library)
-    lib = library if library is not None else g.load_library()
-    sim_opts = g.header.get("options", {}).get("sim")
-    from igraph_fight.sim import SimParams
-    setup = BoutSetup.create(lib, sim_params=SimParams(**sim_opts) if sim_opts else None, root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
-    trk = load_tracker(tracker)
-    cfg = config or BoutConfig(seconds=seconds)
-    if cfg.seconds != seconds:
-        from dataclasses import replace
-        cfg = replace(cfg, seconds=seconds)
-    bout = PhysicsBout(setup, agents, trk, cfg)
-    if swap_a is not None:
-        t_sw, st = swap_a
-        a0 = agents[0]
-        if not isinstance(a0, IGAgent):
-            raise ValueError("--swap-a needs an Interaction Graph fighter as A")
-
-        def do_swap() -> None:
-            a0.controller.set_style(st, wait=True)
-            a0.name = f"{a0.name}->{st}"
-
-        bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))
-    res = bout.run(seed=seed, progress=progress)
-    title = f"{style_a} vs {style_b}" + (" [root assist: not physics]" if root_assist else "")
-    summary = write_physics_artifacts(bout, res, out, title=title, video=video, video_fps=video_fps, width=width,
-                                      height=height)
-    summary["root_assist"] = bool(root_assist)
-    summary["machine_load"] = _load_average()
-    from motion_graph.atomic import atomic_write_text
-    atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
-    return summary
-
-
-def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_bouts: int = 10, seconds: float = 60.0,
-               depth_a: int = 5, depth_b: int = 5, seed0: int = 0, tracker: str | None = None,
-               root_assist: bool = False, log=print) -> dict:
-    """``n_bouts`` physics bouts (seeds seed0..) between two agents (styles or rl[:CKPT]); the
-    per-bout summaries and the aggregate: mean / std score, falls per fighter per minute, planned
-    and realised hits (ratio over all bouts), mean real-time factor."""
-    from igraph_fight.graph import load_graph
-    g = load_graph(graph) if not hasattr(graph, "arrays") else graph
-    lib = g.load_library()
-    setup = BoutSetup.create(lib, root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
-    trk = load_tracker(tracker)
-    rows = []
-    for i in range(n_bouts):
-        bout = PhysicsBout(setup, agents, trk, BoutConfig(seconds=seconds, record_qpos=False))
-        s = bout.run(seed=seed0 + i).summary()
-        s.pop("agents", None)
-        rows.append(s)
-        log(f"seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), falls "
-            f"{s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
-            f"unplanned {s['unplanned_hits']:.0f}, distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")
-    tot = lambda k: float(sum(r[k] for r in rows))  # noqa: E731
-    sc = np.array([r["score"] for r in rows])
-    minutes = n_bouts * seconds / 60.0
-    p = tot("planned_hits")
-    return {"a": style_a, "b": style_b, "n_bouts": n_bouts, "seconds": seconds, "root_assist": root_assist,
-            "tracker": rows[0]["tracker"] if rows else None,
-            "mean_score": float(sc.mean()), "std_score": float(sc.std()), "wins_a": int((sc > 0).sum()),
-            "losses_a": int((sc < 0).sum()), "hits_a": tot("hits_a"), "hits_b": tot("hits_b"),
-            "falls_per_min_a": tot("falls_a") / minutes, "falls_per_min_b": tot("falls_b") / minutes,
-            "planned_hits": p, "planned_realised": tot("planned_realised"),
-            "planned_realised_ratio": tot("planned_realised") / p if p else None,
-            "unplanned_hits": tot("unplanned_hits"), "mean_distance_m": tot("mean_distance_m") / max(n_bouts, 1),
-            "realtime_factor_mean": tot("realtime_factor") / max(n_bouts, 1), "bouts": rows}
-
-
 if __name__ == "__main__":  # python -m tracker.bout ... (kept): the command line lives in bout_cli
     from .bout_cli import main
     sys.exit(main())
+

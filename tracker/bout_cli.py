@@ -8,7 +8,7 @@ import os
 import sys
 from pathlib import Path
 
-from .bout import run_physics_fight, run_series
+from .bout_run import run_physics_fight, run_series
 
 
 def format_summary(s: dict) -> str:

@@ -213,7 +213,8 @@ def _library_from(graph: str | None, library: str | None):
 
 class _Worker:
     def __init__(self, cfg: RLConfig, graph: str | None, library: str | None, tracker: str, wid: int) -> None:
-        from .bout import BoutConfig, BoutSetup, load_tracker
+        from .bout_agents import load_tracker
+        from .bout_setup import BoutConfig, BoutSetup
         torch.set_num_threads(1)
         self.cfg = cfg
         self.lib = _library_from(graph, library)
@@ -462,7 +463,9 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
     from igraph_fight.controller import NPCController
     from igraph_fight.graph import load_graph
 
-    from .bout import BoutConfig, BoutSetup, IGAgent, PhysicsBout, load_tracker
+    from .bout import PhysicsBout
+    from .bout_agents import IGAgent, load_tracker
+    from .bout_setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = _library_from(None, library) if library else g.load_library()
     setup = BoutSetup.create(lib, root_assist=root_assist)

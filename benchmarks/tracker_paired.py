@@ -22,7 +22,7 @@ from tracker.walks import walk_source  # noqa: E402
 def paired(ckpt: str | None, n_walks: int = 100, n_actions: int = 20, seed: int = 0, library: str | None = None,
            baseline: str | None = None) -> dict:
     """tracker.evaluate.paired_comparison of the checkpoint's policy against PD-only (or against the
-    policy of checkpoint ``baseline``; the "pd_" figures are then the baseline's)."""
+    policy of checkpoint ``baseline``)."""
     base = load_policy(baseline) if baseline else PDController()
     return paired_comparison(make_setup(walk_source(library)), load_policy(ckpt), base, n_walks, n_actions, seed)
 
@@ -42,10 +42,10 @@ def main(argv=None) -> int:
     if a.json:
         print(json.dumps(r, indent=1))
     else:
-        print(f"{r['walks']} walks x {r['actions']} actions, seed {r['seed']}: mean time to fall {base} {r['pd_ttf_s']:.3f} s, "
+        print(f"{r['walks']} walks x {r['actions']} actions, seed {r['seed']}: mean time to fall {base} {r['baseline_ttf_s']:.3f} s, "
               f"policy {r['policy_ttf_s']:.3f} s ({r['ratio']:.2f}x); paired difference {r['diff_s']:+.3f} s "
               f"(95% {r['diff_ci95_s'][0]:+.3f} .. {r['diff_ci95_s'][1]:+.3f}); policy longer on {r['policy_better_walks']} "
-              f"walks, shorter on {r['policy_worse_walks']}; MPJPE {base} {r['pd_mpjpe_cm']:.1f} cm, policy "
+              f"walks, shorter on {r['policy_worse_walks']}; MPJPE {base} {r['baseline_mpjpe_cm']:.1f} cm, policy "
               f"{r['policy_mpjpe_cm']:.1f} cm ({r['wall_s']:.0f} s)")
     return 0
 

@@ -30,7 +30,7 @@ def test_widened_shipped_policy_acts_exactly_as_before(source):
     from tracker.widen import widen_checkpoint
     ck = load_checkpoint(DEFAULT_CKPT)
     old = LearnedController(ck)
-    wide = LearnedController(widen_checkpoint(ck, (1, 2, 4, 8, 12, 16)))
+    wide = LearnedController(widen_checkpoint(ck, (1, 2, 4, 8, 12, 16))[0])
     assert wide.obs_future == (1, 2, 4, 8, 12, 16)
     assert wide.obs_dim == old.obs_dim + 3 * (old.act_dim + 8)
     setup = make_setup(source)

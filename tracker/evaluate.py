@@ -140,11 +140,11 @@ def paired_comparison(setup: EvalSetup, controller: Controller, baseline: Contro
     base_t, pol_t = np.array([r.time_s for r in base]), np.array([r.time_s for r in pol])
     d = pol_t - base_t
     half = 1.96 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
-    return {"walks": n_walks, "actions": n_actions, "seed": seed, "pd_ttf_s": float(base_t.mean()),
+    return {"walks": n_walks, "actions": n_actions, "seed": seed, "baseline_ttf_s": float(base_t.mean()),
             "policy_ttf_s": float(pol_t.mean()), "ratio": float(pol_t.mean() / base_t.mean()),
             "diff_s": float(d.mean()), "diff_ci95_s": [float(d.mean() - half), float(d.mean() + half)],
             "policy_better_walks": int((d > 0).sum()), "policy_worse_walks": int((d < 0).sum()),
-            "pd_mpjpe_cm": 100 * float(np.mean([r.mpjpe_m for r in base])),
+            "baseline_mpjpe_cm": 100 * float(np.mean([r.mpjpe_m for r in base])),
             "policy_mpjpe_cm": 100 * float(np.mean([r.mpjpe_m for r in pol])), "wall_s": time.time() - t0}
 
 

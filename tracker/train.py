@@ -688,7 +688,7 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
     # One thread: on a shared 2-core machine torch's thread pool oversubscribes the cores
     # (measured: 830 ms vs 55 ms per minibatch with 2 threads vs 1 while the workers run).
     torch.set_num_threads(1)
-    ck, widened = None, None
+    ck, widen_labels_of = None, None
     if resume:
         ck = load_checkpoint(resume)
         if "critic_hidden" not in ck["config"] and "value" in ck:
@@ -700,9 +700,10 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
         log(f"resuming {resume}: {ck['budget']['samples']} samples so far; overrides {overrides or {}}")
         old_future = tuple(ck["config"].get("obs_future", (1, 2, 4)))
         if old_future != tuple(cfg.obs_future):
-            from .widen import widen_checkpoint
-            widened = (ck, old_future)
-            ck = widen_checkpoint(ck, tuple(cfg.obs_future))
+            from .widen import widen_checkpoint, widen_labels
+            ck, src, new = widen_checkpoint(ck, tuple(cfg.obs_future))
+            mean = np.asarray(ck["obs_mean"], float)
+            widen_labels_of = lambda o: widen_labels(o, src, new, mean)  # noqa: E731 (stored labels, below)
             log(f"observation widened: reference horizons {old_future} -> {tuple(cfg.obs_future)} "
                 f"(new inputs start with zero weights; optimiser states restart)")
     budget = dict(ck["budget"]) if ck else {"samples": 0, "cpu_s": 0.0, "wall_s": 0.0, "iterations": 0, "runs": 0}
@@ -750,15 +751,7 @@ def train(cfg: TrainConfig, library: str | None, minutes: float, out: str, resum
             bar = tqdm(total=int(minutes * 60), unit="s", desc="train", dynamic_ncols=True)
         buf = LabelBuffer(cfg.replay_labels)
         if resume and cfg.algo in ("search", "teacher"):
-            transform = None
-            if widened is not None:
-                from .widen import column_map, widen_labels
-                old_ck, old_future = widened
-                src, new = column_map(int(old_ck["policy"]["mu.0.weight"].shape[1]), act_dim, old_future,
-                                      tuple(cfg.obs_future), cfg.balance_obs)
-                mean = np.asarray(ck["obs_mean"], float)
-                transform = lambda o: widen_labels(o, src, new, mean)  # noqa: E731
-            if buf.load(labels_path(resume), obs_dim, act_dim, transform=transform):
+            if buf.load(labels_path(resume), obs_dim, act_dim, transform=widen_labels_of):
                 log(f"resumed {len(buf)} labels from {labels_path(resume)}")
             else:   # the first iterations distil on a few hundred new labels only
                 log(f"warning: no labels at {labels_path(resume)}; the buffer starts empty")

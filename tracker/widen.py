@@ -52,8 +52,9 @@ def column_map(obs_dim_old: int, n_act: int, old_future: tuple[int, ...], new_fu
     return np.array(src), np.array(new)
 
 
-def widen_checkpoint(ck: dict, new_future: tuple[int, ...]) -> dict:
-    """A copy of checkpoint ``ck`` whose policy (and critic, normaliser) read ``new_future``. The
+def widen_checkpoint(ck: dict, new_future: tuple[int, ...]) -> tuple[dict, np.ndarray, np.ndarray]:
+    """A copy of checkpoint ``ck`` whose policy (and critic, normaliser) read ``new_future``, and
+    the column map used (``column_map``'s source and is_new, for ``widen_labels``). The
     optimisers' states are dropped (their shapes change); everything else is kept."""
     cfg = dict(ck["config"])
     old_future = tuple(cfg.get("obs_future", (1, 2, 4)))
@@ -74,7 +75,7 @@ def widen_checkpoint(ck: dict, new_future: tuple[int, ...]) -> dict:
     for key in ("optimizer", "actor_optimizer"):
         out.pop(key, None)
     out["config"] = {**cfg, "obs_future": tuple(new_future)}
-    return out
+    return out, src, new
 
 
 def widen_labels(obs: np.ndarray, src: np.ndarray, new: np.ndarray, mean: np.ndarray) -> np.ndarray:

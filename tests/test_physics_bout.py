@@ -190,3 +190,36 @@ def _assisted_parts(setup):
     from tracker.bout import BoutSetup
     a = BoutSetup.create(setup.library, root_assist=True)
     return a.scene, a.env, a.lift_m, a.tables, a.game, True
+
+
+@pytest.mark.parametrize("place", ["reference", "fall"])
+def test_fallen_fighter_gets_up_where_the_rule_says(setup, place):
+    """PD-only fighters fall within seconds; at the reset the fallen fighter's pelvis is put on its
+    reference pelvis at the fall (reset_place="reference": the topple undone) or on its physical
+    pelvis then ("fall"); the two places differ (a topple carries the pelvis away)."""
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.pd import PDController
+    lib = setup.library
+    guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], PDController(),
+                       BoutConfig(seconds=6.0, reset_place=place))
+    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=3.0))
+    at_fall = {}
+    for _ in range(bout.n_steps):
+        n_events = len(bout.fall_events)
+        t = bout.env.t
+        ref_next = [bout.F[k].ref.qpos[t + 1, :2].copy() for k in (0, 1)]   # before a fall holds it
+        bout.step()
+        for e in bout.fall_events[n_events:]:
+            k = e["player"]
+            at_fall[k] = (ref_next[k], bout.pelvis_xy(k), e["reset_t"])
+        done = [k for k, (_, _, rt) in at_fall.items() if bout.env.t / 30.0 >= rt + 1e-9 and not bout.F[k].down]
+        if done:
+            k = done[0]
+            ref_xy, phys_xy, _ = at_fall[k]
+            got = bout.pelvis_xy(k)
+            assert np.linalg.norm(ref_xy - phys_xy) > 0.1           # the rules put it in different places
+            want = ref_xy if place == "reference" else phys_xy
+            assert np.linalg.norm(got - want) < 0.05, (got, want)
+            return
+    pytest.fail("no fighter fell and got up within the bout")

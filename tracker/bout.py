@@ -46,10 +46,13 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   35 cm below the reference pelvis): the fall is counted, the fighter lies for ``fall_pause_s``
   (its PD holds its last reference pose; no hits by or on it count), then it is reset to a
   standing guard pose (the first frame of a guard action, chosen with the bout's generator, with
-  the reference's velocities) at the pelvis ground position and fighting direction it had when
-  the fall was detected (not where the body came to rest: a toppled body lies up to a metre
-  away), at least ``reset_min_distance_m`` from the opponent, and plays that guard action before
-  choosing again. The library has no get-up motion, so a reset is the rule.
+  the reference's velocities) at its reference pelvis ground position and its fighting direction
+  when the fall was detected (``reset_place="reference"``: where its motion had taken it, the topple
+  undone; ``"fall"``, the rule before: the physical pelvis then, which a topple has already
+  carried 0.5-1.5 m, and since the library has no forward step such displacements ratchet the
+  fighters apart: 3.9 m mean distance and no planned hit in a measured 60 s bout), at least
+  ``reset_min_distance_m`` from the opponent, and plays that guard action before choosing again.
+  The library has no get-up motion, so a reset is the rule.
 * Score = realised hits of A - realised hits of B (the kinematic bouts' score).
 * Per control step and fighter the competitive-sports paper's reward terms are accumulated
   (match: clipped fist force given - received; close: exp(-3 d^2), d the closest distance of the
@@ -470,7 +473,8 @@ class PhysicsBout:
                 f.segments = [s for s in f.segments if s.t0 <= t]
                 f.segments.append(_Segment(t, g, -f.n_inst, hold=True))
                 f.pending_guard = g
-                f.fall_pose = (self.pelvis_xy(k), self.fighting_heading(k, t))
+                xy = f.ref.qpos[t, :2].copy() if cfg.reset_place == "reference" else self.pelvis_xy(k)
+                f.fall_pose = (xy, self.fighting_heading(k, t))
                 self._hold_after(k, t)
                 f.t_dec_end = f.reset_at + int(self.nf[g]) - 1
                 self.fall_events.append({"t": round(t / 30.0, 4), "player": k, "reason": info.fall[k],

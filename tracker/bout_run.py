@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,8 +67,9 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
 
 def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_bouts: int = 10, seconds: float = 60.0,
                depth_a: int = 5, depth_b: int = 5, seed0: int = 0, tracker: str | None = None,
-               root_assist: bool = False, log=print) -> dict:
-    """``n_bouts`` physics bouts (seeds seed0..) between two agents (styles or rl[:CKPT]); the
+               root_assist: bool = False, log=print, config: BoutConfig | None = None) -> dict:
+    """``n_bouts`` physics bouts (seeds seed0..) between two agents (styles or rl[:CKPT]) under the
+    rules ``config`` (default BoutConfig; its seconds are replaced by ``seconds``); the
     per-bout summaries and the aggregate: mean / std score, falls per fighter per minute, planned
     and realised hits (ratio over all bouts), mean real-time factor."""
     from igraph_fight.graph import load_graph
@@ -78,7 +80,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     trk = load_tracker(tracker)
     rows = []
     for i in range(n_bouts):
-        bout = PhysicsBout(setup, agents, trk, BoutConfig(seconds=seconds, record_qpos=False))
+        bout = PhysicsBout(setup, agents, trk, replace(config or BoutConfig(), seconds=seconds, record_qpos=False))
         s = bout.run(seed=seed0 + i).summary()
         s.pop("agents", None)
         rows.append(s)

@@ -31,6 +31,9 @@ class BoutConfig:
         fall_pause_s: how long a fallen fighter lies before it is reset.
         reset_min_distance_m: a reset fighter is put at least this far (pelvis ground distance)
             from the opponent.
+        reset_place: where a fallen fighter gets up: "reference" (its reference pelvis when the fall
+            was detected: where its motion had taken it, the topple undone) or "fall" (its
+            physical pelvis then, already displaced by the topple).
         blend_frames: pose blend from the previous action's end (ActionLibrary.sequence_motion).
         init_distance_m: initial distance range (the kinematic game's).
         physics_hz: physics rate.
@@ -44,6 +47,7 @@ class BoutConfig:
     window_slack: tuple[int, int] = (1, 4)
     fall_pause_s: float = 1.0
     reset_min_distance_m: float = 0.6
+    reset_place: str = "reference"
     blend_frames: int = 4
     init_distance_m: tuple[float, float] = (1.0, 3.0)
     physics_hz: float = 240.0
@@ -52,6 +56,10 @@ class BoutConfig:
     w_energy: float = 0.001
     w_penalty: float = 30.0
     record_qpos: bool = True
+
+    def __post_init__(self) -> None:
+        if self.reset_place not in ("reference", "fall"):
+            raise ValueError(f"BoutConfig.reset_place must be 'reference' or 'fall', not {self.reset_place!r}")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -101,6 +101,8 @@ class TrainConfig:
     lr_max: float = 1e-3
     max_grad_norm: float = 1.0        # critic
     max_grad_norm_actor: float = 1e3  # SGD actor: the step size comes from the adaptive lr, not clipping
+    critic_warmup: int = 0            # PPO updates of each run that fit the critic only (the actor is
+                                      # kept): for fine-tuning a distilled policy whose critic never trained
     # imitation of the balance-feedback teacher (tracker.imitation.teacher_labels)
     teacher_gains: tuple[float, ...] = ()
     teacher_noise: float = 0.05       # DART noise on the executed teacher action (rad)
@@ -494,8 +496,9 @@ class Learner:
         Aa, LP, ADV, RET = flat(act), flat(logp_old), flat(adv), flat(ret)
         ADV = (ADV - ADV.mean()) / (ADV.std() + 1e-8)
         stats = {"pi_loss": 0.0, "v_loss": 0.0, "kl": 0.0, "epochs": 0}
-        self.actor_opt.param_groups[0]["lr"] = self.lr_actor
         self.n_updates += 1
+        warmup = self.n_updates <= c.critic_warmup
+        self.actor_opt.param_groups[0]["lr"] = self.lr_actor
         g = torch.Generator().manual_seed(int(c.seed * 100003 + self.n_updates))
         for ep in range(c.epochs):
             perm = torch.randperm(n, generator=g).to(self.device)
@@ -513,7 +516,8 @@ class Learner:
                 torch.nn.utils.clip_grad_norm_(self.actor.parameters(), c.max_grad_norm_actor)
                 torch.nn.utils.clip_grad_norm_(self.critic.parameters(), c.max_grad_norm)
                 self.opt.step()
-                self.actor_opt.step()
+                if not warmup:
+                    self.actor_opt.step()
                 with torch.no_grad():
                     self.actor.log_std.clamp_(min=c.min_log_std)
                 stats["pi_loss"] = float(pi_loss.detach())
@@ -529,7 +533,9 @@ class Learner:
         # adaptive step size: Adam's per-parameter steps do not shrink with a noisy gradient, so the
         # KL of each update sets the actor's learning rate (measured: a fixed 1e-4..1e-3 moved the
         # policy at random, KL 0.1..7 per update)
-        if stats["kl"] > 2.0 * c.target_kl:
+        if warmup:
+            pass
+        elif stats["kl"] > 2.0 * c.target_kl:
             self.lr_actor = max(c.lr_min, self.lr_actor / 1.5)
         elif stats["kl"] < 0.5 * c.target_kl:
             self.lr_actor = min(c.lr_max, self.lr_actor * 1.5)

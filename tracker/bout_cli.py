@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from .bout_run import run_physics_fight, run_series
+from .bout_setup import BoutConfig
 
 
 def format_summary(s: dict) -> str:
@@ -51,7 +52,9 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
                                     tracker=getattr(args, "tracker", None), video=video,
                                     video_fps=float(getattr(args, "video_fps", 15.0) or 15.0),
                                     root_assist=bool(getattr(args, "root_assist", False)),
-                                    progress=not args.json)
+                                    progress=not args.json,
+                                    config=BoutConfig(seconds=args.seconds,
+                                                      reset_place=getattr(args, "reset_place", "reference")))
     except (FileNotFoundError, ValueError) as e:
         print(f"igraph-fight: error: {e}", file=sys.stderr)
         return 2
@@ -60,6 +63,10 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
     else:
         print(format_summary(summary))
     return 0
+
+
+RESET_HELP = ("where a fallen fighter gets up: on its reference pelvis (default; the topple undone) or where "
+              "its pelvis was when the fall was detected (the rule before)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--no-video", dest="video", action="store_false", default=True)
     f.add_argument("--video-fps", type=float, default=15.0)
     f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
+    f.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     f.add_argument("--json", action="store_true")
     r = sub.add_parser("series", help="N physics bouts between two agents, aggregated (no artifacts)")
     r.add_argument("--graph", required=True)
@@ -92,16 +100,19 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seed0", type=int, default=0)
     r.add_argument("--tracker", default=None)
     r.add_argument("--root-assist", action="store_true")
+    r.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     r.add_argument("--out", default=None, help="write the result (with every bout's summary) as JSON")
     a = p.parse_args(argv)
     if a.cmd == "fight":
         return cmd_physics_fight(a)
     if a.cmd == "series":
         res = run_series(a.graph, a.a, a.b, a.bouts, a.seconds, a.depth_a, a.depth_b, a.seed0, a.tracker,
-                         a.root_assist, log=lambda x: print(x, flush=True))
+                         a.root_assist, log=lambda x: print(x, flush=True),
+                         config=BoutConfig(reset_place=a.reset_place))
         if a.out:
+            from motion_graph.atomic import atomic_write_text
             Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(a.out).write_text(json.dumps(res, indent=1))
+            atomic_write_text(Path(a.out), json.dumps(res, indent=1))
         print(json.dumps({k: v for k, v in res.items() if k != "bouts"}, indent=1))
         return 0
     return 2

@@ -40,7 +40,6 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     trk = load_tracker(tracker)
     cfg = config or BoutConfig(seconds=seconds)
     if cfg.seconds != seconds:
-        from dataclasses import replace
         cfg = replace(cfg, seconds=seconds)
     bout = PhysicsBout(setup, agents, trk, cfg)
     if swap_a is not None:
@@ -59,6 +58,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     summary = write_physics_artifacts(bout, res, out, title=title, video=video, video_fps=video_fps, width=width,
                                       height=height)
     summary["root_assist"] = bool(root_assist)
+    summary["reset_place"] = cfg.reset_place
     summary["machine_load"] = _load_average()
     from motion_graph.atomic import atomic_write_text
     atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
@@ -92,6 +92,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     minutes = n_bouts * seconds / 60.0
     p = tot("planned_hits")
     return {"a": style_a, "b": style_b, "n_bouts": n_bouts, "seconds": seconds, "root_assist": root_assist,
+            "reset_place": (config or BoutConfig()).reset_place,
             "tracker": rows[0]["tracker"] if rows else None,
             "mean_score": float(sc.mean()), "std_score": float(sc.std()), "wins_a": int((sc > 0).sum()),
             "losses_a": int((sc < 0).sum()), "hits_a": tot("hits_a"), "hits_b": tot("hits_b"),

@@ -16,7 +16,9 @@ Read top to bottom:
 3. ``collect``: workers step their environments with the current policy (residual PD targets on
    the reference, Gaussian exploration) for ``horizon`` steps and send the transitions back.
 4. ``ppo_update``: GAE advantages, clipped-ratio policy loss, value regression, a few epochs of
-   minibatches (on the GPU when ``--device`` finds one; the CPU path is the product).
+   minibatches (on the GPU when ``--device`` finds one; the CPU path is the product). Fine-tuning
+   a distilled policy (``--resume`` a search run with ``--set algo=ppo``): ``critic_warmup``
+   updates fit the critic alone first, and ``--set lr_actor=3e-6`` starts the actor's step small.
 5. ``train``: the loop; logs a learning curve (reward per step, fall rate / mean time between
    falls under RSI, episode length), writes a resumable checkpoint every ``ckpt_every_min``
    minutes and at the end, and a PNG of the curve next to it.
@@ -533,11 +535,9 @@ class Learner:
         # adaptive step size: Adam's per-parameter steps do not shrink with a noisy gradient, so the
         # KL of each update sets the actor's learning rate (measured: a fixed 1e-4..1e-3 moved the
         # policy at random, KL 0.1..7 per update)
-        if warmup:
-            pass
-        elif stats["kl"] > 2.0 * c.target_kl:
+        if not warmup and stats["kl"] > 2.0 * c.target_kl:
             self.lr_actor = max(c.lr_min, self.lr_actor / 1.5)
-        elif stats["kl"] < 0.5 * c.target_kl:
+        elif not warmup and stats["kl"] < 0.5 * c.target_kl:
             self.lr_actor = min(c.lr_max, self.lr_actor * 1.5)
         stats["lr_actor"] = self.lr_actor
         self.norm.update(obs.reshape(-1, obs.shape[-1]))   # after the update: the batch used the old stats

@@ -25,6 +25,9 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", default="out/fight", help="output folder (default out/fight)")
     p.add_argument("--physics", action="store_true", help="run the bout in MuJoCo physics (tracker)")
+    p.add_argument("--reset-place", choices=("reference", "fall"), default="reference",
+                   help="physics: where a fallen fighter gets up: on its reference pelvis (default; the topple "
+                        "undone) or where its pelvis was when the fall was detected")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd_fight)
 
@@ -53,6 +56,9 @@ def cmd_fight(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 2
         return cmd_physics_fight(args)
+    if getattr(args, "reset_place", "reference") != "reference":
+        print("igraph-fight: error: --reset-place applies to physics bouts only (add --physics)", file=sys.stderr)
+        return 2
     from .bouts import run_style_bout
 
     swap = None

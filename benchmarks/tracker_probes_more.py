@@ -29,8 +29,9 @@ from motion_graph.classify import KINDS
 from tracker.evaluate import draw_walks, make_setup, run_walk
 from tracker.pd import PDController
 from tracker.policy import load_policy
-from tracker.reference import Reference, build_reference, ctrl_targets, lowest_point, qpos_velocity
+from tracker.reference import Reference, build_reference, lowest_point
 from tracker.walks import walk_source
+from tracker_probes import rebuilt   # benchmarks/tracker_probes.py: a Reference from edited qpos
 
 SHIPPED = "tracker/checkpoints/boxing_cmu13.pt"
 
@@ -71,12 +72,8 @@ def pinned(ref: Reference, scene, contact_m: float = 0.02) -> tuple[Reference, f
         off[t] = o
     q = ref.qpos.copy()
     q[:, :2] += off
-    qv = qpos_velocity(q, fm, ref.fps)
-    c, cv = ctrl_targets(q, qv, fm)
-    s = ref.sites.copy()
-    s[:, :, :2] += off[:, None]
     speed = float(np.abs(np.diff(off, axis=0)).sum() / max(T - 1, 1) * ref.fps)
-    return Reference(ref.fps, q, qv, c, cv, s, ref.penetration, ref.source, dict(ref.meta)), speed
+    return rebuilt(ref, scene, fm, q), speed     # a horizontal move keeps the lift: velocities, targets, sites
 
 
 def contacts(src, setup, walks, ctrls) -> None:

@@ -78,9 +78,10 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     setup = BoutSetup.create(lib, root_assist=root_assist)
     agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
+    cfg = replace(config or BoutConfig(), seconds=seconds, record_qpos=False)
     rows = []
     for i in range(n_bouts):
-        bout = PhysicsBout(setup, agents, trk, replace(config or BoutConfig(), seconds=seconds, record_qpos=False))
+        bout = PhysicsBout(setup, agents, trk, cfg)
         s = bout.run(seed=seed0 + i).summary()
         s.pop("agents", None)
         rows.append(s)
@@ -92,7 +93,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     minutes = n_bouts * seconds / 60.0
     p = tot("planned_hits")
     return {"a": style_a, "b": style_b, "n_bouts": n_bouts, "seconds": seconds, "root_assist": root_assist,
-            "reset_place": (config or BoutConfig()).reset_place,
+            "reset_place": cfg.reset_place,
             "tracker": rows[0]["tracker"] if rows else None,
             "mean_score": float(sc.mean()), "std_score": float(sc.std()), "wins_a": int((sc > 0).sum()),
             "losses_a": int((sc < 0).sum()), "hits_a": tot("hits_a"), "hits_b": tot("hits_b"),

@@ -26,10 +26,10 @@ import mujoco
 import numpy as np
 
 from motion_graph.classify import KINDS
-from tracker.evaluate import draw_walks, make_setup, run_walk
+from tracker.evaluate import draw_walks, make_setup, run_walk, track_reference, walk_reference
 from tracker.pd import PDController
 from tracker.policy import load_policy
-from tracker.reference import Reference, build_reference, lowest_point
+from tracker.reference import Reference, lowest_point
 from tracker.walks import walk_source
 from tracker_probes import rebuilt   # benchmarks/tracker_probes.py: a Reference from edited qpos
 
@@ -37,13 +37,9 @@ SHIPPED = "tracker/checkpoints/boxing_cmu13.pt"
 
 
 def track(env, ctrl, ref) -> float:
-    """Seconds tracked from frame 0 until the fall (or the reference's end)."""
-    obs = env.reset(ref, 0)
-    ctrl.reset(env)
-    while True:
-        obs, _, done, _ = env.step(ctrl.act(env, obs))
-        if done:
-            return env.sim_time
+    """Seconds tracked from frame 0 until the fall (or the reference's end): the evaluation's loop."""
+    track_reference(env, ctrl, ref)
+    return env.sim_time
 
 
 def pinned(ref: Reference, scene, contact_m: float = 0.02) -> tuple[Reference, float]:
@@ -79,7 +75,7 @@ def pinned(ref: Reference, scene, contact_m: float = 0.02) -> tuple[Reference, f
 def contacts(src, setup, walks, ctrls) -> None:
     m = setup.scene.model
     sr0, si0 = m.geom_solref.copy(), m.geom_solimp.copy()
-    refs = [build_reference(src.sequence_motion(w), setup.scene, 0) for w in walks]
+    refs = [walk_reference(setup, w)[1] for w in walks]
     for name, tc, imp in (("default", None, None), ("solref 0.01 s", 0.01, None), ("solref 0.005 s", 0.005, None),
                           ("solimp 0.99", None, 0.99)):
         m.geom_solref[:] = sr0
@@ -98,7 +94,7 @@ def pin(src, setup, walks, ctrls) -> None:
     res = {f"{cn} {k}": [] for cn in ctrls for k in ("as built", "stance foot pinned")}
     speeds = []
     for w in walks:
-        ref = build_reference(src.sequence_motion(w), setup.scene, 0)
+        ref = walk_reference(setup, w)[1]
         pref, sp = pinned(ref, setup.scene)
         speeds.append(sp)
         for cn, c in ctrls.items():

@@ -76,34 +76,42 @@ def make_setup(source, options: ModelOptions = ModelOptions(), config: EnvConfig
     return EvalSetup(source, spec, options, config)
 
 
-def run_walk(setup: EvalSetup, controller: Controller, walk: list[int], lift: str = "auto",
-             blend_frames: int = 4) -> WalkResult:
-    """Track one walk with a controller; see the module doc for the metrics."""
-    env = setup.env
+def walk_reference(setup: EvalSetup, walk: list[int], lift: str = "auto", blend_frames: int = 4):
+    """The walk's motion (resampled to the control rate) and its Reference (tracker.reference)."""
     motion = setup.source.sequence_motion(walk, blend_frames)
     ctrl_hz = setup.config.control_hz
     if abs(motion.fps - ctrl_hz) > 1e-9:
         motion = motion.resample(ctrl_hz)
-    ref = build_reference(motion, setup.scene, 0, lift=lift)
-    fm = setup.scene.fighters[0]
-    kin = kinematic_error(motion, ref, fm)
+    return motion, build_reference(motion, setup.scene, 0, lift=lift)
+
+
+def track_reference(env: TrackingEnv, controller: Controller, ref) -> tuple[list[float], str | None, float]:
+    """Track ``ref`` from its first frame until its end or a fall: the global joint position error
+    (m) of every control step, the fall's reason (None when the reference ran out) and the wall
+    seconds of the loop. The env is left at the last step (env.t, env.sim_time, env.data)."""
     obs = env.reset(ref, 0)
     controller.reset(env)
     errs = []
-    fall = None
     t0 = time.perf_counter()
     while True:
-        action = controller.act(env, obs)
-        obs, _, done, info = env.step(action)
+        obs, _, done, info = env.step(controller.act(env, obs))
         errs.append(info.mpjpe_m[0])
         if done:
-            fall = info.fall[0]
-            break
-    wall = time.perf_counter() - t0
+            return errs, info.fall[0], time.perf_counter() - t0
+
+
+def run_walk(setup: EvalSetup, controller: Controller, walk: list[int], lift: str = "auto",
+             blend_frames: int = 4) -> WalkResult:
+    """Track one walk with a controller; see the module doc for the metrics."""
+    env = setup.env
+    motion, ref = walk_reference(setup, walk, lift, blend_frames)
+    fm = setup.scene.fighters[0]
+    kin = kinematic_error(motion, ref, fm)
+    errs, fall, wall = track_reference(env, controller, ref)
     pel = env.data.qpos[fm.qpos_adr:fm.qpos_adr + 2]
     drift = float(np.linalg.norm(pel - ref.qpos[env.t, :2]))
     before = ref.meta.get("penetration_before_lift", {})
-    first = errs[:int(round(ctrl_hz))]
+    first = errs[:int(round(setup.config.control_hz))]
     return WalkResult(list(walk), ref.duration, env.sim_time, fall is not None, fall, float(np.mean(errs)),
                       float(np.mean(first)), drift, float(kin.max()), ref.penetration.p95_m, ref.penetration.max_m,
                       before.get("p95_cm", 0.0) / 100.0, before.get("max_cm", 0.0) / 100.0, ref.penetration.lift_m,

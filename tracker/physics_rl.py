@@ -87,6 +87,29 @@ class RLConfig:
         return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in names})
 
 
+def parse_overrides(items: list[str] | None) -> dict:
+    """``["lr=1e-4", "hidden=256,256"]`` -> typed RLConfig overrides (ValueError naming a bad one)."""
+    defaults = asdict(RLConfig())
+    out = {}
+    for it in items or []:
+        k, eq, v = it.partition("=")
+        if not eq:
+            raise ValueError(f"--set {it!r}: expected KEY=VALUE")
+        if k not in defaults:
+            raise ValueError(f"--set: unknown RLConfig field {k!r} (fields: {', '.join(defaults)})")
+        d = defaults[k]
+        try:
+            if isinstance(d, bool):
+                out[k] = v.lower() in ("1", "true", "yes")
+            elif isinstance(d, tuple):
+                out[k] = tuple(int(x) for x in v.split(","))
+            else:
+                out[k] = type(d)(v)
+        except ValueError:
+            raise ValueError(f"--set {k}={v!r}: not a valid {type(d).__name__}") from None
+    return out
+
+
 class ActorCritic(nn.Module):
     """Shared MLP trunk, a logit per library action (masked to the menu) and a value."""
 
@@ -337,8 +360,11 @@ def ppo_update(net: ActorCritic, opt: torch.optim.Optimizer, data: dict, cfg: RL
 
 
 def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConfig = RLConfig(),
-          library: str | None = None, resume: str | None = None, log=print) -> dict:
-    """Self-play PPO for ``minutes`` of wall clock; writes ``out`` (checkpoint) and ``out``.png."""
+          library: str | None = None, resume: str | None = None, log=print, max_iterations: int | None = None,
+          progress: bool = False) -> dict:
+    """Self-play PPO for ``minutes`` of wall clock (or ``max_iterations`` PPO iterations, whichever
+    ends first); writes ``out`` (checkpoint, atomically, every ``ckpt_every_min`` and at the end)
+    and ``out``.png. ``resume`` continues a checkpoint: weights, optimiser, opponent pool, budget."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     ctx = mp.get_context("spawn")
@@ -362,7 +388,7 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
             opt.load_state_dict(ck["optimizer"])
         history = list(ck.get("history", []))
         budget = dict(ck.get("budget", budget))
-    pool: list[dict] = []
+    pool: list[dict] = list(ck.get("pool", [])) if resume else []
     lib_info = _lib_info(graph, library)
     t_start = time.time()
     wall0 = budget["wall_s"]
@@ -373,13 +399,20 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
         budget["wall_s"] = wall0 + (time.time() - t_start)
         ck = {"model": net.state_dict(), "optimizer": opt.state_dict(), "config": asdict(cfg), "obs_dim": obs_dim,
               "n_actions": A, "history": history, "budget": budget, "library": lib_info,
-              "tracker": str(tracker), "final": final}
+              "tracker": str(tracker), "final": final, "pool": pool}
         tmp = str(out) + ".tmp"
         torch.save(ck, tmp)
         os.replace(tmp, out)
 
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=int(minutes * 60), unit="s", desc="physics rl", dynamic_ncols=True)
+        log = bar.write                  # the per-iteration lines go above the bar
+    n_it = 0
     try:
-        while time.time() - t_start < minutes * 60.0:
+        while time.time() - t_start < minutes * 60.0 and (max_iterations is None or n_it < max_iterations):
+            n_it += 1
             state = {k: v.clone() for k, v in net.state_dict().items()}
             opp = pool[int(rng.integers(len(pool)))] if pool else None
             for c in pipes:
@@ -407,10 +440,17 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
             if it % cfg.snapshot_every == 0:
                 pool.append({k: v.clone() for k, v in net.state_dict().items()})
                 pool = pool[-10:]
+            if bar is not None:
+                bar.n = min(int(time.time() - t_start), bar.total)
+                bar.set_postfix(decisions=budget["decisions"], falls_min=f"{h['falls_per_min']:.1f}",
+                                hits_min=f"{h['hits_per_min']:.2f}")
+                bar.refresh()
             if time.time() - last_ckpt > cfg.ckpt_every_min * 60.0:
                 save()
                 last_ckpt = time.time()
     finally:
+        if bar is not None:
+            bar.close()
         for c in pipes:
             try:
                 c.send(("stop",))
@@ -483,7 +523,8 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
             s = res.summary()
             rows.append({k: s[k] for k in ("seed", "score", "hits_a", "hits_b", "falls_a", "falls_b", "planned_hits_a",
                                             "planned_hits_b", "planned_realised", "planned_hits", "mean_distance_m",
-                                            "realtime_factor", "damage_n_a", "damage_n_b")})
+                                            "realtime_factor", "damage_n_a", "damage_n_b", "decisions_a",
+                                            "decisions_b", "kind_share_a", "kind_share_b")})
             log(f"{style} vs rl, seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), "
                 f"falls {s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
                 f"distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")
@@ -496,9 +537,20 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
             "falls_ig_per_min": tot("falls_a") / (n_bouts * seconds / 60), "falls_rl_per_min": tot("falls_b") / (n_bouts * seconds / 60),
             "planned_hits": tot("planned_hits"), "planned_realised": tot("planned_realised"),
             "damage_n_ig": tot("damage_n_a"), "damage_n_rl": tot("damage_n_b"),
+            "kind_share_ig": _pooled_shares(rows, "a"), "kind_share_rl": _pooled_shares(rows, "b"),
         }
         npc.close()
     return out
+
+
+def _pooled_shares(rows: list[dict], side: str) -> dict:
+    """Share of each action kind among one side's decisions over all bouts (decision-weighted)."""
+    counts: dict[str, float] = {}
+    for r in rows:
+        for k, v in r[f"kind_share_{side}"].items():
+            counts[k] = counts.get(k, 0.0) + v * r[f"decisions_{side}"]
+    n = sum(counts.values())
+    return {k: round(v / n, 4) for k, v in sorted(counts.items(), key=lambda kv: -kv[1])} if n else {}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -512,6 +564,7 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--out", required=True)
     t.add_argument("--resume", default=None)
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override an RLConfig field")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar (the per-iteration lines stay)")
     e = sub.add_parser("eval", help="planner+tracker fighters vs the RL baseline")
     e.add_argument("--graph", required=True)
     e.add_argument("--library", default=None)
@@ -525,15 +578,15 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--out", default=None, help="write the result as JSON")
     a = p.parse_args(argv)
     if a.cmd == "train":
-        cfg = RLConfig()
-        kw = {}
-        for s in a.set:
-            k, _, v = s.partition("=")
-            cur = getattr(cfg, k)
-            kw[k] = tuple(int(x) for x in v.split(",")) if isinstance(cur, tuple) else type(cur)(v)
-        cfg = RLConfig(**{**asdict(cfg), **kw})
+        try:
+            kw = parse_overrides(a.set)
+        except ValueError as exc:
+            p.error(str(exc))
+        if not (a.graph or a.library):
+            p.error("train needs --graph or --library (where the actions come from)")
+        cfg = RLConfig(**{**asdict(RLConfig()), **kw})
         res = train(a.graph, a.tracker, a.out, a.minutes, cfg, library=a.library, resume=a.resume,
-                    log=lambda s: print(s, flush=True))
+                    log=lambda s: print(s, flush=True), progress=not a.no_progress)
         print(json.dumps(res["budget"]))
         return 0
     res = evaluate_vs_rl(a.graph, a.rl, a.styles.split(","), a.bouts, a.seconds, a.depth, a.tracker, a.library,
@@ -542,8 +595,9 @@ def main(argv: list[str] | None = None) -> int:
     summary["styles"] = {s: {k: v for k, v in d.items() if k != "bouts"} for s, d in res["styles"].items()}
     print(json.dumps(summary, indent=1))
     if a.out:
+        from motion_graph.atomic import atomic_write_text
         Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(a.out).write_text(json.dumps(res, indent=1))
+        atomic_write_text(a.out, json.dumps(res, indent=1))
     return 0
 
 

@@ -176,12 +176,8 @@ class Worker:
         self.pd_eval: dict[int, float] = {}      # validation walk -> PD-only time tracked (s)
 
     def _new_ref(self):
-        from .reference import build_reference
-        walk = self.src.random_walk(self.cfg.walk_actions, self.rng)
-        motion = self.src.sequence_motion(walk)
-        if abs(motion.fps - self.setup.config.control_hz) > 1e-9:
-            motion = motion.resample(self.setup.config.control_hz)
-        ref = build_reference(motion, self.scene, 0, lift="auto")
+        from .evaluate import walk_reference
+        _, ref = walk_reference(self.setup, self.src.random_walk(self.cfg.walk_actions, self.rng))
         return ref, RewardRef.build(self.envs[0] if hasattr(self, "envs") else None, self.scene, ref)
 
     def _reset(self, i: int) -> np.ndarray:

@@ -89,25 +89,8 @@ class RLConfig:
 
 def parse_overrides(items: list[str] | None) -> dict:
     """``["lr=1e-4", "hidden=256,256"]`` -> typed RLConfig overrides (ValueError naming a bad one)."""
-    defaults = asdict(RLConfig())
-    out = {}
-    for it in items or []:
-        k, eq, v = it.partition("=")
-        if not eq:
-            raise ValueError(f"--set {it!r}: expected KEY=VALUE")
-        if k not in defaults:
-            raise ValueError(f"--set: unknown RLConfig field {k!r} (fields: {', '.join(defaults)})")
-        d = defaults[k]
-        try:
-            if isinstance(d, bool):
-                out[k] = v.lower() in ("1", "true", "yes")
-            elif isinstance(d, tuple):
-                out[k] = tuple(int(x) for x in v.split(","))
-            else:
-                out[k] = type(d)(v)
-        except ValueError:
-            raise ValueError(f"--set {k}={v!r}: not a valid {type(d).__name__}") from None
-    return out
+    from .overrides import parse_config_overrides
+    return parse_config_overrides(items, RLConfig)
 
 
 class ActorCritic(nn.Module):

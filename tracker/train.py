@@ -41,6 +41,7 @@ import torch
 
 from .balance import N_BALANCE_ACTIONS, structured_offsets
 from .imitation import LabelBuffer, distill, labels_path, search_labels, teacher_labels
+from .overrides import parse_config_overrides
 from .policy import Actor, Critic, RunningNorm, library_fingerprint, load_checkpoint, policy_observation
 
 
@@ -863,26 +864,16 @@ def _recv(conn):
 
 # ----------------------------------------------------------------------------------------------
 def parse_overrides(items: list[str] | None) -> dict:
-    """``["gamma=0.97", "hidden=256,256"]`` -> typed TrainConfig overrides."""
-    types = {f.name: f.type for f in fields(TrainConfig)}
-    defaults = asdict(TrainConfig())
-    out = {}
-    for it in items or []:
-        k, _, v = it.partition("=")
-        if k not in types:
-            raise ValueError(f"--set: unknown TrainConfig field {k!r}")
-        d = defaults[k]
-        if isinstance(d, bool):
-            out[k] = v.lower() in ("1", "true", "yes")
-        elif isinstance(d, tuple):
-            out[k] = tuple((float(x) if isinstance(d[0], float) else int(x)) for x in v.split(","))
-        else:
-            out[k] = type(d)(v)
-    return out
+    """``["gamma=0.97", "hidden=256,256"]`` -> typed TrainConfig overrides (ValueError naming a bad one)."""
+    return parse_config_overrides(items, TrainConfig)
 
 
 def main_args(args) -> int:
-    over = parse_overrides(getattr(args, "set", None))
+    try:
+        over = parse_overrides(getattr(args, "set", None))
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     if args.push_prob is not None:
         over["push_prob"] = args.push_prob
     cfg = TrainConfig(**{**asdict(TrainConfig()), "seed": args.seed, "n_workers": args.workers,

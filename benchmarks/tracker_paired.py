@@ -3,6 +3,7 @@ difference's confidence interval (the protocol of `tracker eval`: random 20-acti
 
     python benchmarks/tracker_paired.py --ckpt CKPT [--walks 100] [--seed 0] [--json]
     python benchmarks/tracker_paired.py --ckpt CKPT --baseline OTHER.pt ...   # two policies, paired
+    python benchmarks/tracker_paired.py --ckpt CKPT --baseline balance ...    # against PD + virtual-force balance
 """
 from __future__ import annotations
 
@@ -23,14 +24,16 @@ def paired(ckpt: str | None, n_walks: int = 100, n_actions: int = 20, seed: int 
            baseline: str | None = None) -> dict:
     """tracker.evaluate.paired_comparison of the checkpoint's policy against PD-only (or against the
     policy of checkpoint ``baseline``)."""
-    base = load_policy(baseline) if baseline else PDController()
+    base = (PDController.balanced() if baseline == "balance" else load_policy(baseline) if baseline
+            else PDController())
     return paired_comparison(make_setup(walk_source(library)), load_policy(ckpt), base, n_walks, n_actions, seed)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--ckpt", help="policy checkpoint (default: the shipped one)")
-    ap.add_argument("--baseline", help="a second policy checkpoint to compare with instead of PD-only")
+    ap.add_argument("--baseline", help="a second policy checkpoint to compare with instead of PD-only, or 'balance' "
+                    "(PD + the virtual-force balance layer, tracker/vforce.py)")
     ap.add_argument("--library", help="action library file (default: built from the CMU boxing takes)")
     ap.add_argument("--walks", type=int, default=100)
     ap.add_argument("--actions", type=int, default=20)

@@ -47,6 +47,9 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
     if name == "pd":
         from .pd import PDController
         return PDController.from_ckpt(ckpt)
+    if name == "balance":
+        from .pd import PDController
+        return PDController.from_ckpt(ckpt) if ckpt else PDController.balanced()
     if name not in CONTROLLERS:
         if name == "learned":
             try:  # the next issue's module registers "learned" when imported
@@ -55,5 +58,5 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
             except ModuleNotFoundError:
                 pass
         if name not in CONTROLLERS:
-            raise ValueError(f"unknown controller {name!r}; available: pd{''.join(', ' + k for k in CONTROLLERS)}")
+            raise ValueError(f"unknown controller {name!r}; available: pd, balance{''.join(', ' + k for k in CONTROLLERS)}")
     return CONTROLLERS[name](ckpt)

@@ -110,6 +110,8 @@ class TrackingEnv:
         # Optional callable(data, substep) run after every physics substep (e.g. tracker.bout reads
         # fist contacts of every substep, not only the last one); None: one mj_step(nstep) call.
         self.substep_hook = None
+        # Optional virtual-force balance layer (tracker.vforce), set by a controller's reset.
+        self.balance = None
         self._cache = [self._make_cache(k) for k in range(len(scene.fighters))]
         self.n_act = sum(c.n_act for c in self._cache)
 
@@ -155,6 +157,19 @@ class TrackingEnv:
             ids = np.arange(c.act.start, c.act.stop)
             self.model.actuator_forcerange[ids, 0] = -limit
             self.model.actuator_forcerange[ids, 1] = limit
+
+    def set_balance(self, gains, fighter: int | None = None) -> None:
+        """Turn the virtual-force balance layer (tracker.vforce) on with ``gains`` (a BalanceGains, five
+        numbers or a dict), or off with None, for one fighter or all. Internal joint torques through the
+        leg actuators, no force on the root. Takes effect at once (controllers call it in reset)."""
+        from .vforce import BalanceGains, VirtualForceBalance
+        g = BalanceGains.parse(gains)
+        if self.balance is None:
+            if g is None:
+                return
+            self.balance = VirtualForceBalance(self)
+        for k in (range(self.n_fighters) if fighter is None else [fighter]):
+            self.balance.gains[k] = g
 
     def set_root_assist(self, on: bool) -> None:
         """Hold each pelvis on its reference with a weld (needs ModelOptions(root_assist=True)).
@@ -233,12 +248,16 @@ class TrackingEnv:
             d.ctrl[c.act] = target
         if self._assist:
             self._move_root_targets(min(self.t + 1, self.t_end))   # where the step should end
-        if self.substep_hook is None:
+        balance = self.balance if self.balance is not None and self.balance.active else None
+        if self.substep_hook is None and balance is None:
             mujoco.mj_step(self.model, d, nstep=self.substeps)
         else:
             for s in range(self.substeps):
                 mujoco.mj_step(self.model, d)
-                self.substep_hook(d, s)
+                if balance is not None:
+                    balance.substep(self, d, s)
+                if self.substep_hook is not None:
+                    self.substep_hook(d, s)
         # mj_step leaves position-dependent quantities one substep old: refresh body and site poses
         # (contacts stay one substep old, which the fall check tolerates).
         mujoco.mj_kinematics(self.model, d)

@@ -25,6 +25,8 @@ class PDController:
         kd_ratio: kd = kd_ratio * kp (seconds).
         torque_scale: multiplies the segment torque-limit table.
         velocity_targets: damp towards the reference joint velocity instead of zero.
+        balance: virtual-force balance gains (tracker.vforce.BalanceGains: five numbers or a dict)
+            turned on in the env at reset; None (default, the plain PD baseline): off.
     """
 
     kp_scale: float = 1.0
@@ -32,6 +34,7 @@ class PDController:
     torque_scale: float = 1.0
     velocity_targets: bool = False
     name: str = "pd"
+    balance: tuple | dict | None = None
 
     @classmethod
     def from_ckpt(cls, ckpt: str | None) -> "PDController":
@@ -42,7 +45,17 @@ class PDController:
         kw = {k: float(v) for k, v in data.items() if k in ("kp_scale", "kd_ratio", "torque_scale")}
         if "velocity_targets" in data:
             kw["velocity_targets"] = bool(data["velocity_targets"])
+        if data.get("balance"):
+            kw["balance"] = data["balance"]
+            kw["name"] = "balance"
         return cls(**kw)
+
+    @classmethod
+    def balanced(cls, gains=None) -> "PDController":
+        """PD plus the virtual-force balance layer (default gains unless given)."""
+        from .vforce import BalanceGains
+        g = BalanceGains.parse(gains) if gains is not None else BalanceGains()
+        return cls(balance=g.as_tuple(), name="balance")
 
     def to_json(self) -> str:
         return json.dumps({k: v for k, v in asdict(self).items() if k != "name"})
@@ -61,6 +74,7 @@ class PDController:
         for k, (kp, kd, tq) in enumerate(self.gains(env)):
             env.set_gains(kp, kd, k)
             env.set_torque_limits(tq, k)
+        env.set_balance(self.balance)
 
     def act(self, env, obs: np.ndarray) -> np.ndarray:
         if env.config.residual_actions:

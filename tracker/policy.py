@@ -9,7 +9,9 @@
   targets (radians, rotation-vector components) added to the reference targets of the step. A
   two-fighter scene is a batch of two; nothing couples the fighters inside the policy.
 - The controller sets the PD gains / torque limits / velocity-target mode the policy was trained
-  with (stored in the checkpoint) at reset. No force is ever applied to the root.
+  with (stored in the checkpoint) at reset, and the virtual-force balance layer under the policy
+  (tracker/vforce.py) when the checkpoint's config has ``vf_gains``. No force is ever applied to
+  the root.
 - Inference is a numpy forward pass of the MLP (no torch call per step): a few microseconds.
 
 Checkpoint (torch.save dict): ``policy`` (state dict), ``obs_mean``/``obs_var`` (normaliser),
@@ -212,6 +214,7 @@ class PDSettings:
     kd_ratio: float = 0.2
     torque_scale: float = 1.0
     velocity_targets: bool = False
+    vf_gains: tuple = ()              # virtual-force balance layer (tracker.vforce); () = off
 
 
 class LearnedController:
@@ -243,12 +246,14 @@ class LearnedController:
         self.balance = bool(cfg.get("balance_obs", False))
         self.action_space = cfg.get("action_space", "joints")
         self.obs_future = tuple(cfg.get("obs_future", (1, 2, 4)))   # reference horizons it was trained with
-        self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets") if k in cfg})
+        self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets")
+                                if k in cfg}, vf_gains=tuple(cfg.get("vf_gains", ())))
 
     # ---------------------------------------------------------------- Controller interface
     def reset(self, env) -> None:
         from .pd import PDController
-        pd = PDController(self.pd.kp_scale, self.pd.kd_ratio, self.pd.torque_scale, self.pd.velocity_targets)
+        pd = PDController(self.pd.kp_scale, self.pd.kd_ratio, self.pd.torque_scale, self.pd.velocity_targets,
+                          balance=tuple(self.pd.vf_gains) or None)
         pd.reset(env)
         for c in env._cache:
             if self.action_space == "joints" and c.n_act != self.act_dim:
@@ -285,7 +290,8 @@ class LearnedController:
 
     def describe(self) -> str:
         b = self.budget
-        return (f"learned policy {self.ckpt_path or '(in memory)'}: trained {b.get('samples', 0) / 1e6:.1f}M samples, "
+        vf = " over the virtual-force balance layer" if self.pd.vf_gains else ""
+        return (f"learned policy {self.ckpt_path or '(in memory)'}{vf}: trained {b.get('samples', 0) / 1e6:.1f}M samples, "
                 f"{b.get('cpu_hours', 0.0):.2f} CPU-hours on {self.library.get('describe', '?')}")
 
 

@@ -77,6 +77,8 @@ class TrainConfig:
     kd_ratio: float = 0.2
     torque_scale: float = 1.0
     velocity_targets: bool = False
+    vf_gains: tuple[float, ...] = ()  # virtual-force balance layer under the policy (tracker.vforce.BalanceGains:
+                                      # com_kp, com_kd, root_kp, root_kd, torque_clip); () = off
     physics_hz: float = 240.0
     # policy
     action_space: str = "joints"      # "joints": residual per actuator; "balance": tracker.balance.structured_offsets
@@ -161,7 +163,9 @@ class Worker:
         self.setup = make_setup(self.src, ModelOptions(physics_hz=cfg.physics_hz), env_cfg)
         self.scene = self.setup.scene
         self.envs = [TrackingEnv(self.scene, env_cfg) for _ in range(cfg.envs_per_worker)]
-        self.pd = PDController(cfg.kp_scale, cfg.kd_ratio, cfg.torque_scale, cfg.velocity_targets)
+        self.pd = PDController(cfg.kp_scale, cfg.kd_ratio, cfg.torque_scale, cfg.velocity_targets,
+                               balance=tuple(cfg.vf_gains) or None)
+        self.pd_plain = PDController(cfg.kp_scale, cfg.kd_ratio, cfg.torque_scale, cfg.velocity_targets)
         f = self.scene.fighters[0]
         self.pelvis = f.pelvis_body
         torso = [f.body_ids[i] for i, j in enumerate(f.body_joints) if j == f.spec.parts.get("chest", -1)]
@@ -288,7 +292,7 @@ class Worker:
         out = []
         for i in walk_ids:
             if i not in self.pd_eval:
-                self.pd_eval[i] = run_walk(self.setup, self.pd, walks[i]).time_s
+                self.pd_eval[i] = run_walk(self.setup, self.pd_plain, walks[i]).time_s
             r = run_walk(self.setup, ctrl, walks[i])
             out.append((i, r.time_s, r.fell, r.mpjpe_m, self.pd_eval[i]))
         return out

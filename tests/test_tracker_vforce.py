@@ -1,0 +1,95 @@
+"""The virtual-force balance layer (tracker/vforce.py): only leg joint targets change, never the
+root; zero gains change nothing; it keeps the body up longer than PD on fixed walks; it runs for
+two fighters and is turned on by a learned policy's checkpoint config."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tracker.evaluate import draw_walks, make_setup, run_walk, walk_reference
+from tracker.pd import PDController
+from tracker.vforce import BalanceGains
+from tracker.walks import LibraryWalks
+
+pytestmark = pytest.mark.realdata
+
+
+@pytest.fixture(scope="module")
+def setup(boxing_library):
+    return make_setup(LibraryWalks(boxing_library))
+
+
+def test_gains_parse_and_errors():
+    assert BalanceGains.parse(None) is None and BalanceGains.parse(()) is None
+    g = BalanceGains.parse([1, 2, 3, 4, 5])
+    assert g == BalanceGains(1.0, 2.0, 3.0, 4.0, 5.0) and BalanceGains.parse(g.as_tuple()) == g
+    assert BalanceGains.parse({"com_kp": 7}).com_kp == 7.0
+    with pytest.raises(ValueError, match="5 or 6 numbers"):
+        BalanceGains.parse([1, 2, 3])
+
+
+def _trajectory(setup, ctrl, walk, steps=45):
+    env = setup.env
+    _, ref = walk_reference(setup, walk)
+    obs = env.reset(ref, 0)
+    ctrl.reset(env)
+    qs, ctrls = [], []
+    for _ in range(steps):
+        u = ctrl.act(env, obs)
+        obs, _, done, _ = env.step(u)
+        qs.append(env.data.qpos.copy())
+        ctrls.append((u.copy(), env.data.ctrl.copy(), env.data.qfrc_applied.copy(), env.data.xfrc_applied.copy()))
+        if done:
+            break
+    return np.array(qs), ctrls
+
+
+def test_zero_gains_change_nothing_and_only_leg_targets_move(setup):
+    walk = draw_walks(setup.source, 1, 6, 3)[0]
+    q_pd, _ = _trajectory(setup, PDController(), walk)
+    q_zero, _ = _trajectory(setup, PDController(balance=(0, 0, 0, 0, 130)), walk)
+    np.testing.assert_array_equal(q_pd, q_zero)
+    _, rows = _trajectory(setup, PDController.balanced(), walk)
+    f = setup.scene.fighters[0]
+    legs = {f.spec.parts[f"{s}_{p}"] for s in "lr" for p in ("hip", "knee", "ankle")}
+    leg_act = np.array([int(f.dof_joints[j]) in legs for j in f.act_joint])
+    moved = np.zeros(f.n_act, bool)
+    for u, ctrl, qfrc, xfrc in rows:
+        assert not qfrc.any() and not xfrc.any()           # no applied force anywhere, root included
+        moved |= np.abs(ctrl - u) > 1e-12
+    assert moved.any() and not moved[~leg_act].any()       # the leg actuators' targets, nothing else
+
+
+def test_balance_outlasts_pd_on_fixed_walks(setup):
+    walks = draw_walks(setup.source, 4, 20, 100)
+    pd = [run_walk(setup, PDController(), w).time_s for w in walks]
+    vf = [run_walk(setup, PDController.balanced(), w).time_s for w in walks]
+    # measured: PD 1.36 s, balance 3.44 s on these walks (1.5, 1.3, 1.53, 1.1 s vs 4.87, 4.4, 1.9, 2.57 s);
+    # a layer that did nothing,
+    # or pushed the wrong way, would not clear 1.3x
+    assert np.mean(vf) > 1.3 * np.mean(pd), (pd, vf)
+
+
+def test_two_fighters_and_learned_config(setup, tmp_path):
+    from tracker.env import TrackingEnv
+    from tracker.model import build_fighter_scene
+    from tracker.policy import LearnedController, load_checkpoint, DEFAULT_CKPT
+    scene = build_fighter_scene(setup.spec, 2)
+    env = TrackingEnv(scene, setup.config)
+    _, ref = walk_reference(setup, draw_walks(setup.source, 1, 4, 5)[0])
+    from tracker.reference import build_reference, placement_transform
+    other = setup.source.sequence_motion(draw_walks(setup.source, 1, 4, 6)[0])
+    refs = [ref, build_reference(other, scene, 1, fps=30.0, placement=placement_transform(dx=3.0))]
+    env.reset(refs, 0)
+    PDController.balanced().reset(env)
+    for _ in range(20):
+        env.step(env.reference_targets())
+    assert all(g is not None for g in env.balance.gains)
+    ck = load_checkpoint(DEFAULT_CKPT)
+    ck["config"] = {**ck["config"], "vf_gains": list(BalanceGains().as_tuple())}
+    pol = LearnedController(ck)
+    env.reset(refs, 0)
+    PDController().reset(env)
+    assert not env.balance.active
+    pol.reset(env)
+    assert env.balance.gains == [BalanceGains(), BalanceGains()]

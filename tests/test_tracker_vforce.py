@@ -64,10 +64,9 @@ def test_balance_outlasts_pd_on_fixed_walks(setup):
     walks = draw_walks(setup.source, 4, 20, 100)
     pd = [run_walk(setup, PDController(), w).time_s for w in walks]
     vf = [run_walk(setup, PDController.balanced(), w).time_s for w in walks]
-    # measured: PD 1.36 s, balance 3.44 s on these walks (1.5, 1.3, 1.53, 1.1 s vs 4.87, 4.4, 1.9, 2.57 s);
-    # a layer that did nothing,
-    # or pushed the wrong way, would not clear 1.3x
-    assert np.mean(vf) > 1.3 * np.mean(pd), (pd, vf)
+    # measured: PD 1.36 s, balance (default gains) 1.94 s on these walks (1.5, 1.3, 1.53, 1.1 s vs
+    # 1.77, 2.13, 2.37, 1.47 s; deterministic); a layer that did nothing gives exactly PD's 1.0x
+    assert np.mean(vf) > 1.2 * np.mean(pd), (pd, vf)
 
 
 def test_two_fighters_and_learned_config(setup, tmp_path):

@@ -19,18 +19,17 @@ stance legs by the Jacobian transpose) is added here as a layer under any contro
 The torques go through the leg actuators' PD targets (target += tau / kp), updated after every
 physics substep (so they act from the second of the control step's 8 substeps on; the first runs
 on the controller's targets), and the actuators' torque limits still bound the total: internal
-joint torques only, no force on the root. Measured without the ankles (hips and knees only) the
-layer does nothing (1.41 s against PD's 1.40 s, 24 tuning walks); ankles alone give 2.09 s, all
-three joints 2.82 s: it is mostly an ankle strategy steered by the stance legs. Gains were
-picked by a cross-entropy search on 24 walks of the tuning seed (benchmarks/tracker_vforce_cem.py).
+joint torques only, no force on the root. With the first search's gains (below), without the
+ankles (hips and knees only) the layer does nothing (1.41 s against PD's 1.40 s, 24 tuning walks); ankles alone give 2.09 s, all
+three joints 2.82 s: it is mostly an ankle strategy steered by the stance legs. Gains: two cross-entropy
+searches (benchmarks/tracker_vforce_cem.py, tracker/TRAINING.md ninth session). The first, on the
+time to fall alone, found gains (3300, 720, 750, 75, 130) that double it but balance by sliding
+the loaded feet over the floor (contact-force-weighted foot sliding 0.71 m/s against PD's 0.17
+m/s): a body under them skates, and physics bouts drift apart. The defaults come from the second,
+which charges sliding above 0.25 m/s (policy E's own level): 1.73 s against PD's 1.36 s on the
+protocol's walks at 0.25 m/s, and under policy E 2.17 s at 0.32 m/s (E alone 1.66 s, 0.27 m/s).
 An approximation: the quantities are one physics substep old (MuJoCo's mj_step leaves them so),
 4 ms at 240 Hz.
-
-Caveat (why it is opt-in, not in the shipped tracker): much of the gain comes from sliding the
-loaded feet over the floor (contact-force-weighted foot sliding 0.71 m/s against PD's 0.17 m/s;
-with a 40 N m clip the sliding is back to 0.20 m/s and the time to fall to 1.72 s), so a body
-under it skates, and in physics bouts the fighters drift apart (tracker/TRAINING.md, ninth
-session). A friction-cone-aware split of the wrench between the feet is the next step; not done.
 """
 from __future__ import annotations
 
@@ -44,11 +43,11 @@ import numpy as np
 class BalanceGains:
     """Gains of the virtual-force balance (module doc). Units: N/m, N s/m, N m/rad, N m s/rad, N m."""
 
-    com_kp: float = 3300.0
-    com_kd: float = 720.0
-    root_kp: float = 750.0
-    root_kd: float = 75.0
-    torque_clip: float = 130.0
+    com_kp: float = 3200.0
+    com_kd: float = 500.0
+    root_kp: float = 280.0
+    root_kd: float = 100.0
+    torque_clip: float = 58.0
     drift_kp: float = 0.0             # N/m: pulls the centre of mass towards the reference's world position
                                       # (measured: 300 / 1000 shorten the time to fall, 2.65 / 2.46 s vs 2.82 s)
 

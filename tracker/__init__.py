@@ -7,6 +7,7 @@
     obs, reward, done, info = env.step(PDController().act(env, obs))
     metrics = evaluate_walks(make_setup(LibraryWalks(lib)), PDController())
     policy = load_default_policy()                         # the learned tracker (tracker/policy.py)
+    balanced = PDController.balanced()                     # PD + virtual-force balance (tracker/vforce.py)
     metrics = evaluate_walks(make_setup(LibraryWalks(lib)), policy)
 
 The fall definition lives in tracker.fall; measurements behind the design in tracker/MEASUREMENTS.md,
@@ -26,6 +27,7 @@ _EXPORTS = {
     "policy": ("LearnedController", "load_default_policy", "load_policy"),
     "reference": ("FootPenetration", "Reference", "build_reference", "kinematic_error", "placement_transform"),
     "spec": ("FighterSpec", "FootCalibration", "fighter_spec"),
+    "vforce": ("BalanceGains", "VirtualForceBalance"),
     "walks": ("ClipWindows", "LibraryWalks", "default_library", "walk_source"),
 }
 _WHERE = {name: mod for mod, names in _EXPORTS.items() for name in names}
@@ -49,5 +51,5 @@ __all__ = [
     "EFFECTOR_LABELS", "TARGET_LABELS", "BodyMap", "FighterScene", "ModelOptions", "build_fighter_scene",
     "PDController", "LearnedController", "load_default_policy", "load_policy", "FootPenetration", "Reference", "build_reference", "kinematic_error", "placement_transform",
     "FighterSpec", "FootCalibration", "fighter_spec", "ClipWindows", "LibraryWalks", "default_library",
-    "walk_source",
+    "walk_source", "BalanceGains", "VirtualForceBalance",
 ]

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracker.evaluate import draw_walks, make_setup, walk_reference  # noqa: E402
+from tracker.evaluate import draw_walks, make_setup, track_reference, walk_reference  # noqa: E402
 from tracker.pd import PDController  # noqa: E402
 from tracker.walks import walk_source  # noqa: E402
 
@@ -57,19 +57,13 @@ def sliding(ctrl) -> tuple[float, float]:
                 mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, g, v6, 0)
                 acc[:] += (fr[0] * np.linalg.norm(v6[3:5]), fr[0])
     times = []
-    for w in _WALKS:
-        _, ref = walk_reference(_SETUP, w)
-        obs = env.reset(ref, 0)
-        ctrl.reset(env)
-        env.substep_hook = hook
-        try:
-            while True:
-                obs, _, done, _ = env.step(ctrl.act(env, obs))
-                if done:
-                    break
-        finally:
-            env.substep_hook = None
-        times.append(env.sim_time)
+    env.substep_hook = hook                  # kept by env.reset: the evaluation's own tracking loop
+    try:
+        for w in _WALKS:
+            track_reference(env, ctrl, walk_reference(_SETUP, w)[1])
+            times.append(env.sim_time)
+    finally:
+        env.substep_hook = None
     return float(np.mean(times)), float(acc[0] / max(acc[1], 1e-9))
 
 

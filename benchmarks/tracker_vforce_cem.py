@@ -9,6 +9,9 @@ only, found gains that balance by skating (0.71 m/s); BalanceGains' defaults com
 
     python benchmarks/tracker_vforce_cem.py --walks 24 --slide-penalty 0 --start 4000,800,1000,100,150 --seed 0
     python benchmarks/tracker_vforce_cem.py --walks 12 --slide-penalty 4 --slide-target 0.25 --seed 1   # the defaults
+
+``--arm-velocity-targets`` searches under PD with the arms damped towards the reference velocity
+(tenth session: gains for that setting; TRAINING.md).
 """
 from __future__ import annotations
 
@@ -30,13 +33,15 @@ from tracker.walks import walk_source  # noqa: E402
 _SETUP = None
 _WALKS: list = []
 _PENALTY = (0.0, 0.25)      # (slide_penalty, slide_target), set in the workers by _init
+_ARM_VEL = False            # PD with arm velocity targets (tracker.env), set by _init
 
 
-def _init(n_walks: int, seed: int, penalty: tuple[float, float] = (0.0, 0.25)) -> None:
-    global _SETUP, _WALKS, _PENALTY
+def _init(n_walks: int, seed: int, penalty: tuple[float, float] = (0.0, 0.25), arm_vel: bool = False) -> None:
+    global _SETUP, _WALKS, _PENALTY, _ARM_VEL
     _SETUP = make_setup(walk_source(None))
     _WALKS = draw_walks(_SETUP.source, n_walks, 20, seed)
     _PENALTY = penalty
+    _ARM_VEL = arm_vel
 
 
 def sliding(ctrl) -> tuple[float, float]:
@@ -69,7 +74,7 @@ def sliding(ctrl) -> tuple[float, float]:
 
 def score(log_gains: np.ndarray) -> tuple[float, float, float]:
     """(score, time to fall s, sliding m/s) of PD + the balance layer with exp(log_gains)."""
-    t, sl = sliding(PDController(balance=tuple(float(g) for g in np.exp(log_gains))))
+    t, sl = sliding(PDController(balance=tuple(float(g) for g in np.exp(log_gains)), arm_velocity_targets=_ARM_VEL))
     pen, target = _PENALTY
     return t - pen * max(0.0, sl - target), t, sl
 
@@ -84,15 +89,17 @@ def main(argv=None) -> int:
     ap.add_argument("--slide-penalty", type=float, default=4.0, help="score = time to fall - this x excess sliding")
     ap.add_argument("--slide-target", type=float, default=0.25, help="sliding speed (m/s) that costs nothing")
     ap.add_argument("--start", default="2000,500,750,75,60", help="first mean of the search (five gains)")
+    ap.add_argument("--arm-velocity-targets", action="store_true", help="the PD's arm actuators damp towards the reference velocity")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(a.seed)
     start = np.array([float(x) for x in a.start.split(",")])
     mu, sd = np.log(start), np.full(len(start), 0.5)
     pen = (a.slide_penalty, a.slide_target)
-    _init(a.walks, 100, pen)
-    t_pd, sl_pd = sliding(PDController())
+    _init(a.walks, 100, pen, a.arm_velocity_targets)
+    t_pd, sl_pd = sliding(PDController(arm_velocity_targets=a.arm_velocity_targets))
     print(f"{a.walks} walks of seed 100: PD {t_pd:.2f} s, sliding {sl_pd:.2f} m/s", flush=True)
-    with mp.get_context("fork").Pool(a.workers, initializer=_init, initargs=(a.walks, 100, pen)) as pool:
+    with mp.get_context("fork").Pool(a.workers, initializer=_init,
+                                      initargs=(a.walks, 100, pen, a.arm_velocity_targets)) as pool:
         for gen in range(a.generations):
             t0 = time.time()
             X = mu + sd * rng.standard_normal((a.population, len(mu)))

@@ -154,3 +154,33 @@ def test_reset_rejects_wrong_rate(mocap_root):
     env = TrackingEnv(scene, replace(EnvConfig(), control_hz=60.0))
     with pytest.raises(ValueError):
         env.reset(ref, 0)
+
+
+def test_arm_velocity_targets_offset_only_the_arm_actuators(mocap_root, tmp_path):
+    """arm_velocity_targets: the arm actuators' targets carry (kd / kp) x the reference velocity,
+    every other actuator's target is the plain PD's; velocity_targets offsets all of them."""
+    from tracker.env import ARM_CLASSES
+    scene, ref = _boxing(mocap_root)
+    f = scene.fighters[0]
+    arm = np.array([c in ARM_CLASSES for c in f.act_class])
+    assert arm.any() and not arm.all()
+    k = 40
+    ctrls = {}
+    for name, pd in (("plain", PDController()), ("arms", PDController(arm_velocity_targets=True)),
+                     ("all", PDController(velocity_targets=True))):
+        env = TrackingEnv(scene, EnvConfig())
+        env.reset(ref, k)
+        pd.reset(env)
+        env.step(pd.act(env, None))
+        ctrls[name] = env.data.ctrl[f.ctrl_slice].copy()
+    vel = ref.ctrl_vel[k + 1] * (f.kd / f.kp)
+    assert np.abs(vel[arm]).max() > 1e-3                     # the arms move at that frame
+    np.testing.assert_allclose(ctrls["arms"] - ctrls["plain"], np.where(arm, vel, 0.0), atol=1e-12)
+    np.testing.assert_allclose(ctrls["all"] - ctrls["plain"], vel, atol=1e-12)
+    p = tmp_path / "gains.json"
+    p.write_text('{"arm_velocity_targets": true}')
+    assert PDController.from_ckpt(str(p)).arm_velocity_targets is True
+    # the "balance" controller keeps a gains file's PD knobs and adds the layer's default gains
+    from tracker.vforce import BalanceGains
+    b = make_controller("balance", str(p))
+    assert b.arm_velocity_targets is True and b.balance == BalanceGains().as_tuple()

@@ -92,3 +92,7 @@ def test_two_fighters_and_learned_config(setup, tmp_path):
     assert not env.balance.active
     pol.reset(env)
     assert env.balance.gains == [BalanceGains(), BalanceGains()]
+    assert env.arm_velocity_targets is False
+    ck["config"]["arm_velocity_targets"] = True           # a policy trained with arm velocity targets
+    LearnedController(ck).reset(env)
+    assert env.arm_velocity_targets is True

@@ -49,7 +49,12 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
         return PDController.from_ckpt(ckpt)
     if name == "balance":
         from .pd import PDController
-        return PDController.from_ckpt(ckpt) if ckpt else PDController.balanced()
+        pd = PDController.from_ckpt(ckpt) if ckpt else PDController.balanced()
+        if pd.balance is None:            # a gains file without "balance": its PD knobs, the layer's default gains
+            from dataclasses import replace
+            from .vforce import BalanceGains
+            pd = replace(pd, balance=BalanceGains().as_tuple(), name="balance")
+        return pd
     if name not in CONTROLLERS:
         if name == "learned":
             try:  # the next issue's module registers "learned" when imported

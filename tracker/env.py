@@ -11,7 +11,8 @@ Interface for controllers and for an RL / imitation trainer:
   actuators' coordinates (ball joint: rotation-vector components relative to rest), or residuals
   on the reference targets when ``config.residual_actions``. The velocity target of the PD is the
   reference's (when ``env.velocity_targets``): force = kp (target - q) + kd (ref_qdot - qdot),
-  realised by offsetting ctrl by (kd / kp) ref_qdot.
+  realised by offsetting ctrl by (kd / kp) ref_qdot; ``env.arm_velocity_targets`` does this for the
+  arm actuators only (clavicles, shoulders, elbows, wrists, fists), the rest damping towards zero.
 - Observation per fighter (``observe``): proprioception in the facing frame (pelvis height, up
   vector, root velocity, joint rotation vectors and velocities) plus the reference at
   ``config.obs_future`` control steps ahead (joint targets, root offset and heading offset).
@@ -31,6 +32,10 @@ from .model import FighterScene, rest_frame
 from .reference import Reference
 
 
+#: Segment classes (tracker.model's gain table) whose actuators ``arm_velocity_targets`` covers.
+ARM_CLASSES = ("clavicle", "upper_arm", "forearm", "hand", "fist")
+
+
 @dataclass(frozen=True)
 class EnvConfig:
     """Attributes:
@@ -39,6 +44,8 @@ class EnvConfig:
         velocity_targets: use the reference joint velocities as the PD's velocity target (else the
             PD damps towards zero velocity); the initial value of ``env.velocity_targets``, which a
             controller may set in its reset().
+        arm_velocity_targets: the same for the arm actuators only (when velocity_targets is off):
+            fast punches lag less, the legs and trunk keep the damping measured better for balance.
         target_lead: PD targets are the reference this many control steps ahead (1: the pose the
             step should end in).
         obs_future: control steps ahead at which the reference is observed.
@@ -52,6 +59,7 @@ class EnvConfig:
     control_hz: float = 30.0
     residual_actions: bool = False
     velocity_targets: bool = True
+    arm_velocity_targets: bool = False
     target_lead: int = 1
     obs_future: tuple[int, ...] = (1, 2, 4)
     fall: FallConfig = FallConfig()
@@ -82,6 +90,7 @@ class _FighterCache:
     fall_mask: np.ndarray
     ee_sites: np.ndarray        # indices into the fighter's sites: fists, head top, toes
     ratio: np.ndarray           # kd / kp per actuator
+    arm: np.ndarray             # (n_act,) 1.0 for arm actuators (ARM_CLASSES), else 0.0
     joint_q: np.ndarray         # qpos addresses (D, 4) of ball joints, or (D, 3) hinges
     ball: bool
     n_act: int
@@ -104,6 +113,7 @@ class TrackingEnv:
         self.refs: list[Reference] = []
         self._assist = False
         self.velocity_targets = config.velocity_targets   # a controller may choose (Controller.reset)
+        self.arm_velocity_targets = config.arm_velocity_targets
         self.t = 0
         self.sim_time = 0.0
         self.wall_time = 0.0
@@ -133,7 +143,8 @@ class TrackingEnv:
         lat = lat / np.linalg.norm(lat)
         return _FighterCache(f.ctrl_slice, f.qpos_slice, f.qvel_slice, f.pelvis_body, f.site_ids,
                              np.nonzero(f.tracked)[0], fall_geom_mask(self.model, f), np.array(ee, int),
-                             f.kd / np.maximum(f.kp, 1e-9), jq, ball, f.n_act, lat)
+                             f.kd / np.maximum(f.kp, 1e-9),
+                             np.array([c in ARM_CLASSES for c in f.act_class], float), jq, ball, f.n_act, lat)
 
     @property
     def n_fighters(self) -> int:
@@ -245,6 +256,8 @@ class TrackingEnv:
             target = r.ctrl[k_ref] + a if self.config.residual_actions else a
             if self.velocity_targets:
                 target = target + c.ratio * r.ctrl_vel[k_ref]
+            elif self.arm_velocity_targets:
+                target = target + (c.ratio * c.arm) * r.ctrl_vel[k_ref]
             d.ctrl[c.act] = target
         if self._assist:
             self._move_root_targets(min(self.t + 1, self.t_end))   # where the step should end

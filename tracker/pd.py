@@ -25,6 +25,7 @@ class PDController:
         kd_ratio: kd = kd_ratio * kp (seconds).
         torque_scale: multiplies the segment torque-limit table.
         velocity_targets: damp towards the reference joint velocity instead of zero.
+        arm_velocity_targets: the same for the arm actuators only (tracker.env.ARM_CLASSES).
         balance: virtual-force balance gains (tracker.vforce.BalanceGains: five numbers or a dict)
             turned on in the env at reset; None (default, the plain PD baseline): off.
     """
@@ -35,6 +36,7 @@ class PDController:
     velocity_targets: bool = False
     name: str = "pd"
     balance: tuple | dict | None = None
+    arm_velocity_targets: bool = False
 
     @classmethod
     def from_ckpt(cls, ckpt: str | None) -> "PDController":
@@ -43,8 +45,9 @@ class PDController:
             return cls()
         data = json.loads(Path(ckpt).read_text())
         kw = {k: float(v) for k, v in data.items() if k in ("kp_scale", "kd_ratio", "torque_scale")}
-        if "velocity_targets" in data:
-            kw["velocity_targets"] = bool(data["velocity_targets"])
+        for k in ("velocity_targets", "arm_velocity_targets"):
+            if k in data:
+                kw[k] = bool(data[k])
         if data.get("balance"):
             kw["balance"] = data["balance"]
             kw["name"] = "balance"
@@ -71,6 +74,7 @@ class PDController:
 
     def reset(self, env) -> None:
         env.velocity_targets = self.velocity_targets
+        env.arm_velocity_targets = self.arm_velocity_targets
         for k, (kp, kd, tq) in enumerate(self.gains(env)):
             env.set_gains(kp, kd, k)
             env.set_torque_limits(tq, k)

@@ -215,6 +215,7 @@ class PDSettings:
     torque_scale: float = 1.0
     velocity_targets: bool = False
     vf_gains: tuple = ()              # virtual-force balance layer (tracker.vforce); () = off
+    arm_velocity_targets: bool = False
 
 
 class LearnedController:
@@ -246,14 +247,15 @@ class LearnedController:
         self.balance = bool(cfg.get("balance_obs", False))
         self.action_space = cfg.get("action_space", "joints")
         self.obs_future = tuple(cfg.get("obs_future", (1, 2, 4)))   # reference horizons it was trained with
-        self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets")
-                                if k in cfg}, vf_gains=tuple(cfg.get("vf_gains", ())))
+        self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets",
+                                                    "arm_velocity_targets") if k in cfg},
+                             vf_gains=tuple(cfg.get("vf_gains", ())))
 
     # ---------------------------------------------------------------- Controller interface
     def reset(self, env) -> None:
         from .pd import PDController
         pd = PDController(self.pd.kp_scale, self.pd.kd_ratio, self.pd.torque_scale, self.pd.velocity_targets,
-                          balance=tuple(self.pd.vf_gains) or None)
+                          balance=tuple(self.pd.vf_gains) or None, arm_velocity_targets=bool(self.pd.arm_velocity_targets))
         pd.reset(env)
         for c in env._cache:
             if self.action_space == "joints" and c.n_act != self.act_dim:
@@ -291,6 +293,7 @@ class LearnedController:
     def describe(self) -> str:
         b = self.budget
         vf = " over the virtual-force balance layer" if self.pd.vf_gains else ""
+        vf += ", arm velocity targets" if self.pd.arm_velocity_targets else ""
         return (f"learned policy {self.ckpt_path or '(in memory)'}{vf}: trained {b.get('samples', 0) / 1e6:.1f}M samples, "
                 f"{b.get('cpu_hours', 0.0):.2f} CPU-hours on {self.library.get('describe', '?')}")
 

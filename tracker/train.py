@@ -79,6 +79,7 @@ class TrainConfig:
     velocity_targets: bool = False
     vf_gains: tuple[float, ...] = ()  # virtual-force balance layer under the policy (tracker.vforce.BalanceGains:
                                       # com_kp, com_kd, root_kp, root_kd, torque_clip); () = off
+    arm_velocity_targets: bool = False  # the arm actuators damp towards the reference velocity (tracker.env)
     physics_hz: float = 240.0
     # policy
     action_space: str = "joints"      # "joints": residual per actuator; "balance": tracker.balance.structured_offsets
@@ -164,7 +165,7 @@ class Worker:
         self.scene = self.setup.scene
         self.envs = [TrackingEnv(self.scene, env_cfg) for _ in range(cfg.envs_per_worker)]
         self.pd = PDController(cfg.kp_scale, cfg.kd_ratio, cfg.torque_scale, cfg.velocity_targets,
-                               balance=tuple(cfg.vf_gains) or None)
+                               balance=tuple(cfg.vf_gains) or None, arm_velocity_targets=cfg.arm_velocity_targets)
         self.pd_plain = PDController(cfg.kp_scale, cfg.kd_ratio, cfg.torque_scale, cfg.velocity_targets)
         f = self.scene.fighters[0]
         self.pelvis = f.pelvis_body

@@ -161,6 +161,13 @@ class VirtualForceBalance:
     def active(self) -> bool:
         return any(g is not None for g in self.gains)
 
+    def split(self, d: mujoco.MjData, k: int, feet: list[str], F: np.ndarray, T: np.ndarray):
+        """[(side, force, torque)]: fighter k's virtual wrench shared among its stance feet; equally
+        (measured best: a split by the feet's contact forces, or one capped by each foot's friction
+        cone, keeps the body up for less time at the same sliding, benchmarks/tracker_balance_probes.py)."""
+        share = 1.0 / len(feet)
+        return [(side, F * share, T * share) for side in feet]
+
     def substep(self, env, d: mujoco.MjData, s: int) -> None:
         """After physics substep ``s`` of a control step: set the leg targets for the next substep."""
         m = self.model
@@ -207,12 +214,11 @@ class VirtualForceBalance:
             mujoco.mju_quat2Vel(self._rv, self._qerr, 1.0)
             w = d.xmat[fi.pelvis].reshape(3, 3) @ d.qvel[fi.qvel0 + 3:fi.qvel0 + 6]
             T = g.root_kp * self._rv + g.root_kd * (tr.omega - w)
-            share = 1.0 / len(feet)
-            for side in feet:
+            for side, Fs, Ts in self.split(d, k, feet, F, T):
                 leg = fi.legs[side]
                 mujoco.mj_jac(m, d, self._jp, self._jr, d.xpos[fi.pelvis], leg["body"])
                 cols = leg["cols"]
-                tau = -(self._jp[:, cols].T @ F + self._jr[:, cols].T @ T) * share
+                tau = -(self._jp[:, cols].T @ Fs + self._jr[:, cols].T @ Ts)
                 np.clip(tau, -g.torque_clip, g.torque_clip, out=tau)
                 ids = leg["acts"]
                 d.ctrl[ids] = self._base[ids] + tau / np.maximum(m.actuator_gainprm[ids, 0], 1e-9)

@@ -28,6 +28,9 @@ def register(sub) -> None:
     p.add_argument("--reset-place", choices=("reference", "fall"), default="reference",
                    help="physics: where a fallen fighter gets up: on its reference pelvis (default; the topple "
                         "undone) or where its pelvis was when the fall was detected")
+    p.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent",
+                   help="physics: which way a fallen fighter faces when it gets up: towards the opponent "
+                        "(default) or its fighting direction at the fall")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd_fight)
 
@@ -56,8 +59,9 @@ def cmd_fight(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 2
         return cmd_physics_fight(args)
-    if getattr(args, "reset_place", "reference") != "reference":
-        print("igraph-fight: error: --reset-place applies to physics bouts only (add --physics)", file=sys.stderr)
+    if getattr(args, "reset_place", "reference") != "reference" or getattr(args, "reset_facing", "opponent") != "opponent":
+        print("igraph-fight: error: --reset-place / --reset-facing apply to physics bouts only (add --physics)",
+              file=sys.stderr)
         return 2
     from .bouts import run_style_bout
 

@@ -192,6 +192,36 @@ def _assisted_parts(setup):
     return a.scene, a.env, a.lift_m, a.tables, a.game, True
 
 
+@pytest.mark.parametrize("facing", ["opponent", "fall"])
+def test_fallen_fighter_gets_up_facing_the_way_the_rule_says(setup, facing):
+    """At the reset the fallen fighter's fighting direction points at the opponent's pelvis
+    (reset_facing="opponent", the default) or is its fighting direction at the fall ("fall")."""
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.pd import PDController
+    lib = setup.library
+    guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], PDController(),
+                       BoutConfig(seconds=6.0, reset_facing=facing))
+    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=3.0))
+    fallen = {}
+    for _ in range(bout.n_steps):
+        n_events = len(bout.fall_events)
+        bout.step()
+        for e in bout.fall_events[n_events:]:
+            fallen[e["player"]] = (e["reset_t"], bout.F[e["player"]].fall_pose[1])
+        for k, (rt, h_fall) in fallen.items():
+            if bout.env.t / 30.0 >= rt + 1e-9 and not bout.F[k].down:
+                h = bout.fighting_heading(k, bout.env.t)
+                v = bout.pelvis_xy(1 - k) - bout.pelvis_xy(k)
+                to_opp = np.arctan2(v[0], -v[1])       # mocap heading h faces (sin h, -cos h) in MuJoCo (x, y)
+                want = to_opp if facing == "opponent" else h_fall
+                assert abs(np.angle(np.exp(1j * (h - want)))) < 0.1, (h, want)
+                if facing == "fall":
+                    assert abs(np.angle(np.exp(1j * (h - to_opp)))) > 0.1     # the two rules differ here
+                return
+    pytest.fail("no fighter fell and got up within the bout")
+
+
 @pytest.mark.parametrize("place", ["reference", "fall"])
 def test_fallen_fighter_gets_up_where_the_rule_says(setup, place):
     """PD-only fighters fall within seconds; at the reset the fallen fighter's pelvis is put on its

@@ -46,12 +46,15 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   35 cm below the reference pelvis): the fall is counted, the fighter lies for ``fall_pause_s``
   (its PD holds its last reference pose; no hits by or on it count), then it is reset to a
   standing guard pose (the first frame of a guard action, chosen with the bout's generator, with
-  the reference's velocities) at its reference pelvis ground position and its fighting direction
-  when the fall was detected (``reset_place="reference"``: where its motion had taken it, the topple
+  the reference's velocities) at its reference pelvis ground position when the fall was
+  detected (``reset_place="reference"``: where its motion had taken it, the topple
   undone; ``"fall"``, the rule before: the physical pelvis then, which a topple has already
   carried 0.5-1.5 m, and since the library has no forward step such displacements ratchet the
   fighters apart: 3.9 m mean distance and no planned hit in a measured 60 s bout), at least
   ``reset_min_distance_m`` from the opponent, and plays that guard action before choosing again.
+  It faces the opponent (``reset_facing="opponent"``, the default); ``"fall"`` keeps its fighting
+  direction at the fall, the rule before: a topple often leaves that direction far off, the
+  planner then spends its decisions on turns, and the fighters stay about 2.7 m apart.
   The library has no get-up motion, so a reset is the rule.
 * Score = realised hits of A - realised hits of B (the kinematic bouts' score).
 * Per control step and fighter the competitive-sports paper's reward terms are accumulated
@@ -497,6 +500,11 @@ class PhysicsBout:
         if dist < self.config.reset_min_distance_m:
             u = dv / dist if dist > 1e-6 else np.array([1.0, 0.0])
             xy = oxy + u * self.config.reset_min_distance_m
+        if self.config.reset_facing == "opponent":
+            # mocap heading h faces (sin h, -cos h) in MuJoCo (x, y); the guard's own path heading at
+            # its frame 0 is taken off so that the fighting direction points at the opponent
+            v = oxy - xy
+            h = float(_wrap(np.arctan2(v[0], -v[1]) - self.lib.path[int(self.lib.frame_offsets[g]), 2]))
         f.n_inst += 1
         inst = f.n_inst
         f.segments.append(_Segment(t, g, inst))

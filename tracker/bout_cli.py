@@ -54,7 +54,8 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
                                     root_assist=bool(getattr(args, "root_assist", False)),
                                     progress=not args.json,
                                     config=BoutConfig(seconds=args.seconds,
-                                                      reset_place=getattr(args, "reset_place", "reference")))
+                                                      reset_place=getattr(args, "reset_place", "reference"),
+                                                      reset_facing=getattr(args, "reset_facing", "opponent")))
     except (FileNotFoundError, ValueError) as e:
         print(f"igraph-fight: error: {e}", file=sys.stderr)
         return 2
@@ -65,6 +66,8 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
     return 0
 
 
+FACING_HELP = ("which way a fallen fighter faces when it gets up: towards the opponent (default) or its "
+               "fighting direction at the fall (the rule before)")
 RESET_HELP = ("where a fallen fighter gets up: on its reference pelvis (default; the topple undone) or where "
               "its pelvis was when the fall was detected (the rule before)")
 
@@ -88,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--video-fps", type=float, default=15.0)
     f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
     f.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
+    f.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
     f.add_argument("--json", action="store_true")
     r = sub.add_parser("series", help="N physics bouts between two agents, aggregated (no artifacts)")
     r.add_argument("--graph", required=True)
@@ -101,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--tracker", default=None)
     r.add_argument("--root-assist", action="store_true")
     r.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
+    r.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
     r.add_argument("--out", default=None, help="write the result (with every bout's summary) as JSON")
     a = p.parse_args(argv)
     if a.cmd == "fight":
@@ -108,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.cmd == "series":
         res = run_series(a.graph, a.a, a.b, a.bouts, a.seconds, a.depth_a, a.depth_b, a.seed0, a.tracker,
                          a.root_assist, log=lambda x: print(x, flush=True),
-                         config=BoutConfig(reset_place=a.reset_place))
+                         config=BoutConfig(reset_place=a.reset_place, reset_facing=a.reset_facing))
         if a.out:
             from motion_graph.atomic import atomic_write_text
             Path(a.out).parent.mkdir(parents=True, exist_ok=True)

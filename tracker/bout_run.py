@@ -59,6 +59,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
                                       height=height)
     summary["root_assist"] = bool(root_assist)
     summary["reset_place"] = cfg.reset_place
+    summary["reset_facing"] = cfg.reset_facing
     summary["machine_load"] = _load_average()
     from motion_graph.atomic import atomic_write_text
     atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
@@ -93,7 +94,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     minutes = n_bouts * seconds / 60.0
     p = tot("planned_hits")
     return {"a": style_a, "b": style_b, "n_bouts": n_bouts, "seconds": seconds, "root_assist": root_assist,
-            "reset_place": cfg.reset_place,
+            "reset_place": cfg.reset_place, "reset_facing": cfg.reset_facing,
             "tracker": rows[0]["tracker"] if rows else None,
             "mean_score": float(sc.mean()), "std_score": float(sc.std()), "wins_a": int((sc > 0).sum()),
             "losses_a": int((sc < 0).sum()), "hits_a": tot("hits_a"), "hits_b": tot("hits_b"),

@@ -34,6 +34,10 @@ class BoutConfig:
         reset_place: where a fallen fighter gets up: "reference" (its reference pelvis when the fall
             was detected: where its motion had taken it, the topple undone) or "fall" (its
             physical pelvis then, already displaced by the topple).
+        reset_facing: which way a reset fighter faces: "opponent" (towards the opponent's pelvis, as
+            a boxer gets up facing the other; measured: the fighters close to 1.24 m and plan
+            strikes, tracker/BOUTS.md) or "fall" (its fighting direction when the fall was detected,
+            the rule before: 2.66 m, almost no planned strike).
         blend_frames: pose blend from the previous action's end (ActionLibrary.sequence_motion).
         init_distance_m: initial distance range (the kinematic game's).
         physics_hz: physics rate.
@@ -48,6 +52,7 @@ class BoutConfig:
     fall_pause_s: float = 1.0
     reset_min_distance_m: float = 0.6
     reset_place: str = "reference"
+    reset_facing: str = "opponent"
     blend_frames: int = 4
     init_distance_m: tuple[float, float] = (1.0, 3.0)
     physics_hz: float = 240.0
@@ -60,6 +65,8 @@ class BoutConfig:
     def __post_init__(self) -> None:
         if self.reset_place not in ("reference", "fall"):
             raise ValueError(f"BoutConfig.reset_place must be 'reference' or 'fall', not {self.reset_place!r}")
+        if self.reset_facing not in ("fall", "opponent"):
+            raise ValueError(f"BoutConfig.reset_facing must be 'fall' or 'opponent', not {self.reset_facing!r}")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -192,17 +192,24 @@ def _assisted_parts(setup):
     return a.scene, a.env, a.lift_m, a.tables, a.game, True
 
 
-@pytest.mark.parametrize("facing", ["opponent", "fall"])
-def test_fallen_fighter_gets_up_facing_the_way_the_rule_says(setup, facing):
-    """At the reset the fallen fighter's fighting direction points at the opponent's pelvis
-    (reset_facing="opponent", the default) or is its fighting direction at the fall ("fall")."""
+def _guarding_pd_bout(setup, **rules):
+    """A started 6 s bout of two PD-tracked fighters that only guard, 3 m apart (they fall within
+    seconds), under BoutConfig(**rules)."""
     from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
     from tracker.pd import PDController
     lib = setup.library
     guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
     bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], PDController(),
-                       BoutConfig(seconds=6.0, reset_facing=facing))
+                       BoutConfig(seconds=6.0, **rules))
     bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=3.0))
+    return bout
+
+
+@pytest.mark.parametrize("facing", ["opponent", "fall"])
+def test_fallen_fighter_gets_up_facing_the_way_the_rule_says(setup, facing):
+    """At the reset the fallen fighter's fighting direction points at the opponent's pelvis
+    (reset_facing="opponent", the default) or is its fighting direction at the fall ("fall")."""
+    bout = _guarding_pd_bout(setup, reset_facing=facing)
     fallen = {}
     for _ in range(bout.n_steps):
         n_events = len(bout.fall_events)
@@ -227,13 +234,7 @@ def test_fallen_fighter_gets_up_where_the_rule_says(setup, place):
     """PD-only fighters fall within seconds; at the reset the fallen fighter's pelvis is put on its
     reference pelvis at the fall (reset_place="reference": the topple undone) or on its physical
     pelvis then ("fall"); the two places differ (a topple carries the pelvis away)."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.pd import PDController
-    lib = setup.library
-    guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
-    bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], PDController(),
-                       BoutConfig(seconds=6.0, reset_place=place))
-    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=3.0))
+    bout = _guarding_pd_bout(setup, reset_place=place)
     at_fall = {}
     for _ in range(bout.n_steps):
         n_events = len(bout.fall_events)

@@ -146,7 +146,7 @@ def controllers(which: list[str], **pd_kw) -> dict:
             out[w] = PDController(balance=BalanceGains().as_tuple(), **pd_kw)
         else:
             ck = load_checkpoint(SHIPPED)
-            ck["config"].update({k: v for k, v in pd_kw.items()})
+            ck["config"].update(pd_kw)
             out[w] = LearnedController(ck)
     return out
 

@@ -49,8 +49,8 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
         return PDController.from_ckpt(ckpt)
     if name == "balance":
         from .pd import PDController
-        pd = PDController.from_ckpt(ckpt) if ckpt else PDController.balanced()
-        if pd.balance is None:            # a gains file without "balance": its PD knobs, the layer's default gains
+        pd = PDController.from_ckpt(ckpt)
+        if pd.balance is None:            # no gains file, or one without "balance": the layer's default gains
             from dataclasses import replace
             from .vforce import BalanceGains
             pd = replace(pd, balance=BalanceGains().as_tuple(), name="balance")

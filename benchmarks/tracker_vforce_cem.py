@@ -11,7 +11,11 @@ only, found gains that balance by skating (0.71 m/s); BalanceGains' defaults com
     python benchmarks/tracker_vforce_cem.py --walks 12 --slide-penalty 4 --slide-target 0.25 --seed 1   # the defaults
 
 ``--arm-velocity-targets`` searches under PD with the arms damped towards the reference velocity
-(tenth session: gains for that setting; TRAINING.md).
+(tenth session: gains for that setting; TRAINING.md). ``--policy CKPT`` searches under a learned
+tracker instead of PD (the checkpoint's ``vf_gains`` replaced by each candidate; eleventh session):
+
+    python benchmarks/tracker_vforce_cem.py --policy tracker/checkpoints/boxing_cmu13.pt --walks 12 \
+        --slide-penalty 4 --slide-target 0.32 --start 3200,500,280,100,58 --seed 3
 """
 from __future__ import annotations
 
@@ -34,14 +38,31 @@ _SETUP = None
 _WALKS: list = []
 _PENALTY = (0.0, 0.25)      # (slide_penalty, slide_target), set in the workers by _init
 _ARM_VEL = False            # PD with arm velocity targets (tracker.env), set by _init
+_POLICY = None              # a loaded learned-tracker checkpoint (dict) to search under, set by _init
 
 
-def _init(n_walks: int, seed: int, penalty: tuple[float, float] = (0.0, 0.25), arm_vel: bool = False) -> None:
-    global _SETUP, _WALKS, _PENALTY, _ARM_VEL
+def _init(n_walks: int, seed: int, penalty: tuple[float, float] = (0.0, 0.25), arm_vel: bool = False,
+          policy: str | None = None) -> None:
+    global _SETUP, _WALKS, _PENALTY, _ARM_VEL, _POLICY
     _SETUP = make_setup(walk_source(None))
     _WALKS = draw_walks(_SETUP.source, n_walks, 20, seed)
     _PENALTY = penalty
     _ARM_VEL = arm_vel
+    if policy:
+        import torch
+        torch.set_num_threads(1)
+        from tracker.policy import load_checkpoint
+        _POLICY = load_checkpoint(policy)
+
+
+def controller(gains):
+    """PD (or the learned tracker of ``--policy``) over the balance layer with ``gains`` (None: without it)."""
+    if _POLICY is None:
+        return PDController(balance=gains, arm_velocity_targets=_ARM_VEL)
+    from tracker.policy import LearnedController
+    ck = dict(_POLICY)
+    ck["config"] = dict(_POLICY["config"], vf_gains=list(gains) if gains else [])
+    return LearnedController(ck)
 
 
 def sliding(ctrl) -> tuple[float, float]:
@@ -74,7 +95,7 @@ def sliding(ctrl) -> tuple[float, float]:
 
 def score(log_gains: np.ndarray) -> tuple[float, float, float]:
     """(score, time to fall s, sliding m/s) of PD + the balance layer with exp(log_gains)."""
-    t, sl = sliding(PDController(balance=tuple(float(g) for g in np.exp(log_gains)), arm_velocity_targets=_ARM_VEL))
+    t, sl = sliding(controller(tuple(float(g) for g in np.exp(log_gains))))
     pen, target = _PENALTY
     return t - pen * max(0.0, sl - target), t, sl
 
@@ -90,16 +111,21 @@ def main(argv=None) -> int:
     ap.add_argument("--slide-target", type=float, default=0.25, help="sliding speed (m/s) that costs nothing")
     ap.add_argument("--start", default="2000,500,750,75,60", help="first mean of the search (five gains)")
     ap.add_argument("--arm-velocity-targets", action="store_true", help="the PD's arm actuators damp towards the reference velocity")
+    ap.add_argument("--policy", default=None, help="search under this learned-tracker checkpoint instead of PD")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(a.seed)
     start = np.array([float(x) for x in a.start.split(",")])
     mu, sd = np.log(start), np.full(len(start), 0.5)
     pen = (a.slide_penalty, a.slide_target)
-    _init(a.walks, 100, pen, a.arm_velocity_targets)
-    t_pd, sl_pd = sliding(PDController(arm_velocity_targets=a.arm_velocity_targets))
-    print(f"{a.walks} walks of seed 100: PD {t_pd:.2f} s, sliding {sl_pd:.2f} m/s", flush=True)
+    _init(a.walks, 100, pen, a.arm_velocity_targets, a.policy)
+    base = "the policy alone" if a.policy else "PD"
+    t_pd, sl_pd = sliding(controller(None))
+    print(f"{a.walks} walks of seed 100: {base} {t_pd:.2f} s, sliding {sl_pd:.2f} m/s", flush=True)
+    if a.policy:
+        t0, s0 = sliding(controller(tuple(float(x) for x in start)))
+        print(f"  over the start gains {a.start}: {t0:.2f} s, sliding {s0:.2f} m/s", flush=True)
     with mp.get_context("fork").Pool(a.workers, initializer=_init,
-                                      initargs=(a.walks, 100, pen, a.arm_velocity_targets)) as pool:
+                                      initargs=(a.walks, 100, pen, a.arm_velocity_targets, a.policy)) as pool:
         for gen in range(a.generations):
             t0 = time.time()
             X = mu + sd * rng.standard_normal((a.population, len(mu)))
@@ -110,7 +136,7 @@ def main(argv=None) -> int:
             print(f"generation {gen}: best score {R[i, 0]:.2f} (time to fall {R[i, 1]:.2f} s, sliding {R[i, 2]:.2f} m/s) "
                   f"at {np.round(np.exp(X[i]))}; mean gains {np.round(np.exp(mu))} ({time.time() - t0:.0f} s)", flush=True)
     s, t, sl = score(mu)
-    print(f"final mean gains {np.round(np.exp(mu))}: time to fall {t:.2f} s, sliding {sl:.2f} m/s (PD {t_pd:.2f} s, "
+    print(f"final mean gains {np.round(np.exp(mu))}: time to fall {t:.2f} s, sliding {sl:.2f} m/s ({base} {t_pd:.2f} s, "
           f"{sl_pd:.2f} m/s)")
     return 0
 

@@ -1,7 +1,9 @@
-"""Probe: strike aiming in physics bouts (issue 8, eleventh session); not adopted.
+"""Probes of physics bouts (issue 8, eleventh session): strike aiming (not adopted), why planned
+hits miss, and the fall rule.
 
-    python benchmarks/bout_aim_probe.py series [--bouts 30] [--seconds 60]   # planned hits realised, aim off / on
-    python benchmarks/bout_aim_probe.py misses [--bouts 8]                   # why planned hits miss
+    python benchmarks/bout_probes.py series [--bouts 30] [--seconds 60]   # planned hits realised, aim off / on
+    python benchmarks/bout_probes.py misses [--bouts 8]                   # why planned hits miss
+    python benchmarks/bout_probes.py falls  [--bouts 6]                   # falls by floor contact alone
 
 Infighter vs outboxer (IG, depth 5), the shipped tracker, the default graph build (``--graph``,
 default /tmp/g1k.igz: ``igraph-fight build --mocap ../shared/mocap/cmu/boxing --out /tmp/g1k.igz``),
@@ -23,6 +25,9 @@ tracked bodies drift off their references):
   a damped least-squares inverse kinematics (shoulder and elbow, position only) on the reference
   pose of the coming control step gives the arm joints; their difference to the reference's PD
   targets is added to the tracking controller's targets (both fighters). Joint torques only.
+
+``falls`` counts falls by the issue's definition alone (a body other than the feet on the floor:
+the pelvis-height rule of tracker.fall switched off) against both rules, same seeds.
 
 ``misses`` sorts every planned hit of aim-off and aim-on bouts: realised; a fighter down within
 10 steps before to 5 after the planned step; no contact of the attacker's fists with the
@@ -312,9 +317,27 @@ def misses(graph: str, bouts: int, seconds: float) -> None:
                   f"{int(np.sum(dl > 0.35))} of {len(dl)}", flush=True)
 
 
+def falls(graph: str, bouts: int, seconds: float) -> None:
+    from dataclasses import replace
+    from tracker.fall import FallConfig
+    lib, setup, agents, trk = _setup(graph)
+    env_config = setup.env.config
+    for label, fc in (("both rules (as shipped)", env_config.fall),
+                      ("floor contact alone", FallConfig(pelvis_drop_m=float("inf")))):
+        setup.env.config = replace(env_config, fall=fc)
+        n, reasons = 0, {}
+        for seed in range(1, bouts + 1):
+            s = _bout(setup, agents, trk, None, seconds).run(seed=seed).summary()
+            n += s["falls_a"] + s["falls_b"]
+            for k, v in s["fall_reasons"].items():
+                reasons[k] = reasons.get(k, 0) + v
+        print(f"{label:24s}: {n / (2 * bouts * seconds / 60.0):.1f} falls per fighter-minute, by reason {reasons}", flush=True)
+    setup.env.config = env_config
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("probe", choices=("series", "misses"))
+    ap.add_argument("probe", choices=("series", "misses", "falls"))
     ap.add_argument("--graph", default="/tmp/g1k.igz")
     ap.add_argument("--bouts", type=int, default=None)
     ap.add_argument("--seconds", type=float, default=60.0)
@@ -322,8 +345,10 @@ def main(argv=None) -> int:
     t0 = time.time()
     if a.probe == "series":
         series(a.graph, a.bouts or 30, a.seconds)
-    else:
+    elif a.probe == "misses":
         misses(a.graph, a.bouts or 8, a.seconds)
+    else:
+        falls(a.graph, a.bouts or 6, a.seconds)
     print(f"({time.time() - t0:.0f} s)")
     return 0
 

@@ -393,6 +393,17 @@ def run(env, ctrl, ref, make=None) -> float:
             env.balance = inner
 
 
+def _runs(env, ctrl, refs, cls, cfg) -> tuple[list[float], list]:
+    """Times to fall over the walks with a fresh ``cls(env, cfg)`` in the balance slot for each walk,
+    and those objects (their counters)."""
+    made: list = []
+
+    def make(e):
+        made.append(cls(e, cfg))
+        return made[-1]
+    return [run(env, ctrl, r, make) for r in refs], made
+
+
 def _walks(walks: int, options: ModelOptions = ModelOptions()):
     setup = make_setup(walk_source(None), options=options)
     return setup, [walk_reference(setup, w)[1] for w in draw_walks(setup.source, walks, 20, 100)]
@@ -405,16 +416,10 @@ def step(walks: int) -> None:
     # the relative trigger's error before the layer's falls (a margin that never triggers)
     spans = [(1.2, 99.0), (0.6, 1.2), (0.4, 0.6), (0.2, 0.4), (0.0, 0.2)]
     prof: dict = {sp: [] for sp in spans}
-    ts = []
-    for r in refs:
-        holder: list = []
-
-        def watch(e):
-            holder.append(SteppingBalance(e, StepConfig(margin=np.inf)))
-            return holder[-1]
-        ts.append(run(env, layer, r, watch))
-        for t, e in holder[0].errors:
-            before = ts[-1] - t / 30.0
+    ts, made = _runs(env, layer, refs, SteppingBalance, StepConfig(margin=np.inf))
+    for t_end, sb in zip(ts, made):
+        for t, e in sb.errors:
+            before = t_end - t / 30.0
             for sp in spans:
                 if sp[0] <= before < sp[1]:
                     prof[sp].append(e)
@@ -427,14 +432,7 @@ def step(walks: int) -> None:
     settings += [("error", dict(choose="far")), ("error", dict(hold_s=0.2)), ("error", dict(boost=3.0)),
                  ("error", dict(boost=6.0)), ("error", dict(swing_s=0.4))]
     for label, kw in settings:
-        cfg = replace(base, **kw)
-        holder: list = []
-
-        def make(e, cfg=cfg):
-            sb = SteppingBalance(e, cfg)
-            holder.append(sb)
-            return sb
-        ts = [run(env, layer, r, make) for r in refs]
+        ts, holder = _runs(env, layer, refs, SteppingBalance, replace(base, **kw))
         n = sum(h.n_steps for h in holder)
         land = np.array([x for h in holder for x in h.landings]).reshape(-1, 2)
         print(f"PD + layer + stepping ({label}: {kw}): {np.mean(ts):.3f} s, {n / sum(ts):.2f} steps per second; "
@@ -452,14 +450,7 @@ def idqp(walks: int) -> None:
     base = QPConfig()
     for kw in ({}, dict(every=4), dict(every=2), dict(w_joint=0.005), dict(w_joint=0.5), dict(kp_c=100.0, kd_c=20.0),
                dict(kp_c=15.0, kd_c=6.0), dict(ff=0.0), dict(ff=0.0, w_joint=0.5)):
-        cfg = replace(base, **kw)
-        holder: list = []
-
-        def make(e, cfg=cfg):
-            q = InverseDynamicsQP(e, cfg)
-            holder.append(q)
-            return q
-        ts = [run(env, pd, r, make) for r in refs]
+        ts, holder = _runs(env, pd, refs, InverseDynamicsQP, replace(base, **kw))
         ms = 1000.0 * sum(q.solve_s for q in holder) / max(sum(q.n_solve for q in holder), 1)
         print(f"PD + inverse-dynamics QP {kw}: {np.mean(ts):.3f} s ({ms:.1f} ms per solve)", flush=True)
 

@@ -82,4 +82,6 @@ def test_shipped_checkpoint_loads_for_the_boxing_library(boxing_library):
     agent = load_rl_agent(None, boxing_library)
     ck = load_rl_checkpoint(DEFAULT_RL_CKPT)
     assert agent.n_actions == boxing_library.n_actions == ck["n_actions"]
-    assert ck["final"] and ck["budget"]["wall_s"] >= 60 * 60      # the documented budget: 75 minutes
+    # the documented budget (eleventh session): 40 minutes on two workers, 1.17 CPU-hours, 98,421 decisions
+    assert ck["final"] and ck["budget"]["worker_cpu_s"] >= 3600 and ck["budget"]["decisions"] >= 90_000
+    assert ck["config"]["w_energy"] == 1e-5

@@ -74,6 +74,10 @@ def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, t
     for side in ("kind_share_ig", "kind_share_rl"):          # what each side chose, pooled over the bouts
         shares = res["styles"]["infighter"][side]
         assert shares and sum(shares.values()) == pytest.approx(1.0, abs=1e-3)
+    # the IG fighters can search their first two plies exactly (NPCController's first_ply)
+    res2 = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=1, seconds=1.0, depth=2,
+                          tracker="pd", log=lambda s: None, first_ply="exact2")
+    assert res2["first_ply"] == "exact2" and len(res2["styles"]["infighter"]["bouts"]) == 1
 
 
 @pytest.mark.realdata

@@ -479,8 +479,8 @@ def _plot_history(history: list[dict], path: Path) -> None:
 
 def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: int = 10, seconds: float = 60.0,
                    depth: int = 5, tracker: str | None = None, library: str | None = None, seed0: int = 0,
-                   root_assist: bool = False, log=print) -> dict:
-    """IG fighters (each style, depth ``depth``, as A) vs the RL baseline (B) over ``n_bouts``
+                   root_assist: bool = False, log=print, first_ply: str = "table") -> dict:
+    """IG fighters (each style, depth ``depth``, NPCController's ``first_ply``, as A) vs the RL baseline (B) over ``n_bouts``
     physics bouts each (seeds seed0..seed0+n-1). Returns per style: scores (IG hits - RL hits),
     mean / std / wins, falls and hits each way, planned-vs-realised of the IG fighter."""
     from igraph_fight.controller import NPCController
@@ -495,10 +495,11 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
     trk = load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
     out = {"tracker": getattr(trk, "describe", lambda: trk.name)(), "rl": str(rl_ckpt or DEFAULT_RL_CKPT),
-           "seconds": seconds, "n_bouts": n_bouts, "depth": depth, "root_assist": root_assist, "styles": {}}
+           "seconds": seconds, "n_bouts": n_bouts, "depth": depth, "first_ply": first_ply, "root_assist": root_assist,
+           "styles": {}}
     for style in styles:
-        npc = NPCController(g, lib, style=style, depth=depth)
-        ig = IGAgent(npc, f"{npc.style}({depth})")
+        npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
+        ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
         rows = []
         for i in range(n_bouts):
             bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
@@ -557,6 +558,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--bouts", type=int, default=10)
     e.add_argument("--seconds", type=float, default=60.0)
     e.add_argument("--depth", type=int, default=5)
+    e.add_argument("--first-ply", default="table", choices=("table", "exact", "exact2"),
+                   help="the IG fighters' first plies (igraph_fight.controller.NPCController)")
     e.add_argument("--root-assist", action="store_true")
     e.add_argument("--out", default=None, help="write the result as JSON")
     a = p.parse_args(argv)
@@ -573,7 +576,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(res["budget"]))
         return 0
     res = evaluate_vs_rl(a.graph, a.rl, a.styles.split(","), a.bouts, a.seconds, a.depth, a.tracker, a.library,
-                         root_assist=a.root_assist, log=lambda s: print(s, flush=True))
+                         root_assist=a.root_assist, log=lambda s: print(s, flush=True), first_ply=a.first_ply)
     summary = {k: v for k, v in res.items() if k != "styles"}
     summary["styles"] = {s: {k: v for k, v in d.items() if k != "bouts"} for s, d in res["styles"].items()}
     print(json.dumps(summary, indent=1))

@@ -82,6 +82,7 @@ class SteppingBalance(VirtualForceBalance):
     def __init__(self, env, cfg: StepConfig) -> None:
         super().__init__(env)
         self.cfg = cfg
+        self.env_fighter = env.scene.fighters[0]
         self.scratch = mujoco.MjData(env.model)
         self.jp = np.zeros((3, env.model.nv))
         self.jr = np.zeros((3, env.model.nv))
@@ -165,7 +166,6 @@ class SteppingBalance(VirtualForceBalance):
 
     def _control(self, env, d) -> None:
         cfg, fi, ref = self.cfg, self.fighters[0], env.refs[0]
-        self.env_fighter = env.scene.fighters[0]
         dt = 1.0 / env.config.control_hz
         t = env.t
         for side, pl in list(self.plant.items()):

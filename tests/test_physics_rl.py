@@ -77,7 +77,10 @@ def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, t
     # the IG fighters can search their first two plies exactly (NPCController's first_ply)
     res2 = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=1, seconds=1.0, depth=2,
                           tracker="pd", log=lambda s: None, first_ply="exact2")
-    assert res2["first_ply"] == "exact2" and len(res2["styles"]["infighter"]["bouts"]) == 1
+    assert res2["first_ply"] == "exact2" and res2["styles"]["infighter"]["bouts"][0]["decisions_a"] >= 1
+    with pytest.raises(ValueError, match="first_ply"):                  # the option reaches the controller
+        evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=1, seconds=1.0, depth=2,
+                       tracker="pd", log=lambda s: None, first_ply="bogus")
 
 
 @pytest.mark.realdata

@@ -538,6 +538,7 @@ def _pooled_shares(rows: list[dict], side: str) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from igraph_fight.controller import FIRST_PLY
     p = argparse.ArgumentParser(prog="python -m tracker.physics_rl", description="physics RL baseline")
     sub = p.add_subparsers(dest="cmd", required=True)
     t = sub.add_parser("train", help="self-play PPO for a fixed wall-clock budget")
@@ -558,7 +559,7 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--bouts", type=int, default=10)
     e.add_argument("--seconds", type=float, default=60.0)
     e.add_argument("--depth", type=int, default=5)
-    e.add_argument("--first-ply", default="table", choices=("table", "exact", "exact2"),
+    e.add_argument("--first-ply", default="table", choices=FIRST_PLY,
                    help="the IG fighters' first plies (igraph_fight.controller.NPCController)")
     e.add_argument("--root-assist", action="store_true")
     e.add_argument("--out", default=None, help="write the result as JSON")

@@ -478,13 +478,20 @@ def _decide(pi, pf, pc, best_ea, q_me, r, ts, to, m_self, m_other, f_other, mask
     return a, s, np.sqrt(d2), off, e
 
 
+#: columns of _menu_terms' rows
+MT_ACTION, MT_POS, MT_GIVEN, MT_RECEIVED, MT_DEF, MT_VALUE = 0, 1, 2, 3, 4, 5
+MT_FT = 6          # then the event's raw features sim.FT_* (16 columns)
+N_MT = MT_FT + 16
+
+
 @njit(cache=True)
-def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self, m_other, f_other, mask):
-    """Off-graph decision: simulate every legal action once from the live state (sim._expand_one)
-    and score it by its Eq. 4 reward for the decider (the W_me of planner.rewards) plus gamma
-    times the policy's depth-(D-1) value of the graph state nearest to where it lands.
-    rw = (d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second, distance is "mean",
-    gamma, fps). Returns (best action, its score); (-1, 0) without legal actions."""
+def _menu_terms(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self, m_other, f_other, mask, out):
+    """The exact one-step terms of every legal action from a live state: one simulated event per
+    action (sim._expand_one), its Eq. 4 reward split into the positional cost, the damage-given
+    term (w_dmg_given * kind preference * damage), the damage-received term (w_dmg_received *
+    damage), the defence term, and gamma times the policy's depth-(D-1) value of the graph state
+    nearest to where it lands; then the event's raw features. Row j of ``out`` (MT_* columns) for
+    the j-th action of Next(m_self); returns the number of rows. rw as _lookahead's."""
     rowsw, ctabw, rowsk, ctabk, xf, xi, _ = _views(pi, pf, pc)
     sc = _part(pi, _P_SCALARS)
     nextset_of = _part(pi, 3)
@@ -499,8 +506,6 @@ def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self
     fps = rw[9]
     lo = menu_off[m_self]
     hi = menu_off[m_self + 1]
-    if hi <= lo:
-        return -1, 0.0
     si = np.empty(4, dtype=np.int64)
     sf = np.empty(3)
     si[0] = m_self
@@ -518,8 +523,6 @@ def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self
     frm = np.empty(2, dtype=np.int64)
     msk = np.empty(2, dtype=np.int64)
     stats = np.empty(13)
-    best_a = -1
-    best_q = -np.inf
     npref = pref.shape[0]
     for j in range(lo, hi):
         a = menu_ids[j]
@@ -531,7 +534,6 @@ def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self
             pos *= ft[0] / fps
         k = kinds[a]
         pk = pref[k] if 0 <= k < npref else 1.0
-        w = -pos + w_g * ft[5] * pk - w_r * ft[6] + w_def * ft[7]
         ns = nextset_of[ci[0]]
         key = (ns * key_args[0] + ci[1]) * key_args[1] + ci[3]
         s, _, _ = _nearest(rowsw, ctabw, rowsk, ctabk, _part(pi, 0), sc[1], sc[2], pf[4], xf, xi, _part(pi, 1),
@@ -539,10 +541,37 @@ def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self
         v = 0.0
         if s >= 0:
             v = np.float64(V_opp_next[s]) if swap else np.float64(V_me_next[s])
-        q = w + gamma * v
+        o = out[j - lo]
+        o[MT_ACTION] = a
+        o[MT_POS] = pos
+        o[MT_GIVEN] = w_g * ft[5] * pk
+        o[MT_RECEIVED] = w_r * ft[6]
+        o[MT_DEF] = w_def * ft[7]
+        o[MT_VALUE] = gamma * v
+        o[MT_FT:MT_FT + 16] = ft
+    return hi - lo
+
+
+@njit(cache=True)
+def _lookahead(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self, m_other, f_other, mask):
+    """Off-graph decision: simulate every legal action once from the live state (sim._expand_one)
+    and score it by its Eq. 4 reward for the decider (the W_me of planner.rewards) plus gamma
+    times the policy's depth-(D-1) value of the graph state nearest to where it lands
+    (_menu_terms). rw = (d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second,
+    distance is "mean", gamma, fps). Returns (best action, its score); (-1, 0) without legal actions."""
+    menu_off = _part(pi, 5)
+    out = np.empty((menu_off[m_self + 1] - menu_off[m_self], N_MT))
+    n = _menu_terms(T, pi, pf, pc, V_me_next, V_opp_next, pref, rw, r, ts, to, m_self, m_other, f_other, mask, out)
+    if n == 0:
+        return -1, 0.0
+    best_a = -1
+    best_q = -np.inf
+    for j in range(n):
+        o = out[j]
+        q = -o[MT_POS] + o[MT_GIVEN] - o[MT_RECEIVED] + o[MT_DEF] + o[MT_VALUE]
         if q > best_q:
             best_q = q
-            best_a = a
+            best_a = int(o[MT_ACTION])
     return best_a, best_q
 
 
@@ -843,6 +872,19 @@ class NPCController:
                           float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
                           int(obs.mask_other))
         return int(a), float(q)
+
+    def menu_terms(self, obs: Observation) -> np.ndarray:
+        """The exact one-step terms of every legal action from ``obs`` under the live style: one
+        row per action of Next(m_self), columns MT_* (action, positional cost, damage-given,
+        damage-received and defence terms, gamma * graph value where it lands, then the event's
+        raw sim.FT_* features). Score = -pos + given - received + def + value (what the
+        lookahead maximises); callers may replace terms, e.g. with physically measured hit odds."""
+        table = self._table
+        m = int(obs.m_self)
+        out = np.zeros((int(self._menu_off[m + 1] - self._menu_off[m]), N_MT))
+        _menu_terms(self._T, self._pi, self._pf, self._pc, *table.la, float(obs.r), float(obs.theta_self),
+                    float(obs.theta_other), m, int(obs.m_other), int(obs.f_other), int(obs.mask_other), out)
+        return out
 
     def _exact2(self, table: _Table, obs: Observation) -> tuple[int, float]:
         """Two exact plies + the graph's values at the leaves (``first_ply="exact2"``)."""

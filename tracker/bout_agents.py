@@ -99,10 +99,19 @@ def load_tracker(spec: str | None = None):
 
 def make_agent(spec: str, graph, library, depth: int):
     """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
-    ``rl`` or ``rl:CKPT`` the physics RL baseline (tracker.physics_rl)."""
+    ``STYLE+phys`` or ``STYLE+phys:MODEL`` the IG fighter whose first ply uses physically measured
+    hit odds (tracker.hit_model; default the shipped model); ``rl`` or ``rl:CKPT`` the physics RL
+    baseline (tracker.physics_rl)."""
     if spec == "rl" or spec.startswith("rl:"):
         from .physics_rl import load_rl_agent
         return load_rl_agent(spec[3:] or None, library)
     from igraph_fight.controller import NPCController
+    style, plus, opt = spec.partition("+")
+    if plus:
+        kind, _, model = opt.partition(":")
+        if kind != "phys":
+            raise ValueError(f"unknown fighter option {opt!r} in {spec!r} (STYLE+phys[:MODEL])")
+        from .hit_model import phys_fighter
+        return phys_fighter(graph, library, style, depth, model or None)
     npc = NPCController(graph, library, style=spec, depth=depth)
     return IGAgent(npc, f"{npc.style}({depth})")

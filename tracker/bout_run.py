@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .bout import PhysicsBout
-from .bout_agents import IGAgent, load_tracker, make_agent
+from .bout_agents import load_tracker, make_agent
 from .bout_media import _load_average, write_physics_artifacts
 from .bout_setup import BoutConfig, BoutSetup
 
@@ -45,11 +45,14 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     if swap_a is not None:
         t_sw, st = swap_a
         a0 = agents[0]
-        if not isinstance(a0, IGAgent):
+        if not hasattr(a0, "controller"):
             raise ValueError("--swap-a needs an Interaction Graph fighter as A")
 
         def do_swap() -> None:
-            a0.controller.set_style(st, wait=True)
+            if hasattr(a0, "set_style"):          # tracker.hit_model.PhysIGAgent
+                a0.set_style(st)
+            else:
+                a0.controller.set_style(st, wait=True)
             a0.name = f"{a0.name}->{st}"
 
         bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))

@@ -479,9 +479,12 @@ def _plot_history(history: list[dict], path: Path) -> None:
 
 def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: int = 10, seconds: float = 60.0,
                    depth: int = 5, tracker: str | None = None, library: str | None = None, seed0: int = 0,
-                   root_assist: bool = False, log=print, first_ply: str = "table") -> dict:
+                   root_assist: bool = False, log=print, first_ply: str = "table",
+                   hit_model: str | None = None, future: str = "calibrated") -> dict:
     """IG fighters (each style, depth ``depth``, NPCController's ``first_ply``, as A) vs the RL baseline (B) over ``n_bouts``
-    physics bouts each (seeds seed0..seed0+n-1). Returns per style: scores (IG hits - RL hits),
+    physics bouts each (seeds seed0..seed0+n-1). ``hit_model`` ("default" or a path): the IG
+    fighters score their first ply with physically measured hit odds (tracker.hit_model.phys_fighter,
+    later plies by ``future``) instead of ``first_ply``. Returns per style: scores (IG hits - RL hits),
     mean / std / wins, falls and hits each way, planned-vs-realised of the IG fighter."""
     from igraph_fight.controller import NPCController
     from igraph_fight.graph import load_graph
@@ -494,12 +497,21 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
     setup = BoutSetup.create(lib, root_assist=root_assist)
     trk = load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
+    hm = None
+    if hit_model:
+        from .hit_model import load_hit_model
+        hm = load_hit_model(None if hit_model == "default" else hit_model)
     out = {"tracker": getattr(trk, "describe", lambda: trk.name)(), "rl": str(rl_ckpt or DEFAULT_RL_CKPT),
            "seconds": seconds, "n_bouts": n_bouts, "depth": depth, "first_ply": first_ply, "root_assist": root_assist,
-           "styles": {}}
+           "hit_model": hit_model, "future": future if hit_model else None, "styles": {}}
     for style in styles:
-        npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
-        ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
+        if hm is not None:
+            from .hit_model import phys_fighter
+            ig = phys_fighter(g, lib, style, depth, hm, future)
+            npc = ig.controller
+        else:
+            npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
+            ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
         rows = []
         for i in range(n_bouts):
             bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
@@ -559,8 +571,14 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--bouts", type=int, default=10)
     e.add_argument("--seconds", type=float, default=60.0)
     e.add_argument("--depth", type=int, default=5)
+    e.add_argument("--seed0", type=int, default=0, help="first bout's seed (bouts use seed0, seed0+1, ...)")
     e.add_argument("--first-ply", default="table", choices=FIRST_PLY,
                    help="the IG fighters' first plies (igraph_fight.controller.NPCController)")
+    e.add_argument("--hit-model", nargs="?", const="default", default=None, metavar="MODEL",
+                   help="IG fighters score their first ply with physically measured hit odds (tracker.hit_model; "
+                        "no value: the shipped tracker/checkpoints/hit_model_cmu13.pt)")
+    e.add_argument("--future", default="calibrated", choices=("calibrated", "kinematic", "none"),
+                   help="with --hit-model: the later plies' values (tracker.hit_model.phys_fighter)")
     e.add_argument("--root-assist", action="store_true")
     e.add_argument("--out", default=None, help="write the result as JSON")
     a = p.parse_args(argv)
@@ -577,7 +595,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(res["budget"]))
         return 0
     res = evaluate_vs_rl(a.graph, a.rl, a.styles.split(","), a.bouts, a.seconds, a.depth, a.tracker, a.library,
-                         root_assist=a.root_assist, log=lambda s: print(s, flush=True), first_ply=a.first_ply)
+                         seed0=a.seed0, root_assist=a.root_assist, log=lambda s: print(s, flush=True), first_ply=a.first_ply,
+                         hit_model=a.hit_model, future=a.future)
     summary = {k: v for k, v in res.items() if k != "styles"}
     summary["styles"] = {s: {k: v for k, v in d.items() if k != "bouts"} for s, d in res["styles"].items()}
     print(json.dumps(summary, indent=1))

@@ -152,8 +152,8 @@ def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(
     from tracker.hit_model import calibrated_style, load_hit_model
     m = load_hit_model()
     assert m.meta["n_actions"] == boxing_library.n_actions
-    # the documented data (twelfth session): 560 bouts of 60 s in three rounds, 20% of them held out
-    assert m.meta["samples"] > 55_000 and len(m.meta["held_out_seeds"]) == 112
+    # the documented data (twelfth session): 720 bouts of 60 s in four rounds, 20% of them held out
+    assert m.meta["samples"] > 75_000 and len(m.meta["held_out_seeds"]) == 144
     rep = m.meta["report"]
     for head in ("given", "received"):
         assert rep[head]["auc_model"] > rep[head]["auc_kinematic"] + 0.25
@@ -162,5 +162,9 @@ def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(
     assert calibrated_style(load_style("infighter"), m).w_dmg_given < load_style("infighter").w_dmg_given
     agent = make_agent("infighter+phys", str(tiny_graph_file), boxing_library, 2)   # the shipped model by default
     assert agent.future == "calibrated" and agent.name == "infighter(2, phys)"
+    assert agent.controller.style == "infighter~phys"          # the table of calibrated_style
+    agent.set_style("outboxer")                                # a run-time swap keeps the calibration
+    assert agent.style.name == "outboxer" and agent.controller.style == "outboxer~phys"
+    agent.controller.close()
     with pytest.raises(ValueError, match="STYLE\\+phys"):
         make_agent("infighter+magic", str(tiny_graph_file), boxing_library, 2)

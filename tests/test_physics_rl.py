@@ -74,6 +74,13 @@ def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, t
     for side in ("kind_share_ig", "kind_share_rl"):          # what each side chose, pooled over the bouts
         shares = res["styles"]["infighter"][side]
         assert shares and sum(shares.values()) == pytest.approx(1.0, abs=1e-3)
+    # two worker processes play the same bouts (a bout depends on its seed only)
+    r1 = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=2, seconds=1.0, depth=2,
+                        tracker="pd", log=lambda s: None)
+    r2 = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=2, seconds=1.0, depth=2,
+                        tracker="pd", log=lambda s: None, workers=2)
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "realtime_factor"} for r in rows]  # noqa: E731
+    assert strip(r2["styles"]["infighter"]["bouts"]) == strip(r1["styles"]["infighter"]["bouts"])
     # the IG fighters can search their first two plies exactly (NPCController's first_ply)
     res2 = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=1, seconds=1.0, depth=2,
                           tracker="pd", log=lambda s: None, first_ply="exact2")

@@ -369,7 +369,7 @@ def collect(graph: str, n_bouts: int, out: str | os.PathLike, seconds: float = 6
     if len(jobs) == 1:
         res = [_collect_worker(jobs[0])]
     else:
-        with mp.get_context("fork").Pool(len(jobs)) as pool:
+        with mp.get_context("spawn").Pool(len(jobs)) as pool:      # no fork under running thread pools
             res = pool.map(_collect_worker, jobs)
     data = {k: np.concatenate([r[k] for r in res if len(r[k])]) for k in ("X", "y", "action", "seed", "rl")}
     meta = {"n_bouts": n_bouts, "seconds": seconds, "seed0": seed0, "explore": explore, "graph": str(graph),

@@ -477,15 +477,19 @@ def _plot_history(history: list[dict], path: Path) -> None:
 # evaluation: planner + tracker vs the RL baseline
 
 
-def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: int = 10, seconds: float = 60.0,
-                   depth: int = 5, tracker: str | None = None, library: str | None = None, seed0: int = 0,
-                   root_assist: bool = False, log=print, first_ply: str = "table",
-                   hit_model: str | None = None, future: str = "calibrated") -> dict:
-    """IG fighters (each style, depth ``depth``, NPCController's ``first_ply``, as A) vs the RL baseline (B) over ``n_bouts``
-    physics bouts each (seeds seed0..seed0+n-1). ``hit_model`` ("default" or a path): the IG
-    fighters score their first ply with physically measured hit odds (tracker.hit_model.phys_fighter,
-    later plies by ``future``) instead of ``first_ply``. Returns per style: scores (IG hits - RL hits),
-    mean / std / wins, falls and hits each way, planned-vs-realised of the IG fighter."""
+_ROW_KEYS = ("seed", "score", "hits_a", "hits_b", "falls_a", "falls_b", "planned_hits_a", "planned_hits_b",
+             "planned_realised", "planned_hits", "mean_distance_m", "realtime_factor", "damage_n_a", "damage_n_b",
+             "decisions_a", "decisions_b", "kind_share_a", "kind_share_b")
+
+
+def _eval_rows(job: tuple, log=None) -> list[dict]:
+    """One style's bouts for the given seeds (a worker of evaluate_vs_rl; bouts depend on their
+    seed only, so any split of the seeds gives the same rows)."""
+    (graph, library, rl_ckpt, tracker, root_assist, style, depth, first_ply, hit_model, future, seconds, seeds) = job
+    if log is None:
+        import torch
+        torch.set_num_threads(1)
+        log = lambda s: print(s, flush=True)  # noqa: E731
     from igraph_fight.controller import NPCController
     from igraph_fight.graph import load_graph
 
@@ -497,33 +501,54 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
     setup = BoutSetup.create(lib, root_assist=root_assist)
     trk = load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
-    hm = None
+    if hit_model:
+        from .hit_model import load_hit_model, phys_fighter
+        ig = phys_fighter(g, lib, style, depth, load_hit_model(None if hit_model == "default" else hit_model), future)
+        npc = ig.controller
+    else:
+        npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
+        ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
+    rows = []
+    for seed in seeds:
+        bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
+        s = bout.run(seed=seed).summary()
+        rows.append({k: s[k] for k in _ROW_KEYS})
+        log(f"{style} vs rl, seed {seed}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), "
+            f"falls {s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
+            f"distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")
+    npc.close()
+    return rows
+
+
+def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: int = 10, seconds: float = 60.0,
+                   depth: int = 5, tracker: str | None = None, library: str | None = None, seed0: int = 0,
+                   root_assist: bool = False, log=print, first_ply: str = "table",
+                   hit_model: str | None = None, future: str = "calibrated", workers: int = 1) -> dict:
+    """IG fighters (each style, depth ``depth``, NPCController's ``first_ply``, as A) vs the RL baseline (B) over ``n_bouts``
+    physics bouts each (seeds seed0..seed0+n-1). ``hit_model`` ("default" or a path): the IG
+    fighters score their first ply with physically measured hit odds (tracker.hit_model.phys_fighter,
+    later plies by ``future``) instead of ``first_ply``. ``workers`` > 1 plays the bouts in that many
+    processes (the same rows: a bout depends on its seed only). Returns per style: scores (IG hits -
+    RL hits), mean / std / wins, falls and hits each way, planned-vs-realised of the IG fighter."""
+    from .bout_agents import load_tracker
     if hit_model:
         from .hit_model import load_hit_model
-        hm = load_hit_model(None if hit_model == "default" else hit_model)
+        load_hit_model(None if hit_model == "default" else hit_model)      # a bad path fails here, not in a worker
+    trk = load_tracker(tracker)
     out = {"tracker": getattr(trk, "describe", lambda: trk.name)(), "rl": str(rl_ckpt or DEFAULT_RL_CKPT),
            "seconds": seconds, "n_bouts": n_bouts, "depth": depth, "first_ply": first_ply, "root_assist": root_assist,
            "hit_model": hit_model, "future": future if hit_model else None, "styles": {}}
+    seeds = list(range(seed0, seed0 + n_bouts))
     for style in styles:
-        if hm is not None:
-            from .hit_model import phys_fighter
-            ig = phys_fighter(g, lib, style, depth, hm, future)
-            npc = ig.controller
+        jobs = [(graph, library, rl_ckpt, tracker, root_assist, style, depth, first_ply, hit_model, future, seconds,
+                 seeds[i::workers]) for i in range(max(1, workers)) if seeds[i::workers]]
+        if len(jobs) <= 1:
+            rows = _eval_rows(jobs[0], log) if jobs else []
         else:
-            npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
-            ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
-        rows = []
-        for i in range(n_bouts):
-            bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
-            res = bout.run(seed=seed0 + i)
-            s = res.summary()
-            rows.append({k: s[k] for k in ("seed", "score", "hits_a", "hits_b", "falls_a", "falls_b", "planned_hits_a",
-                                            "planned_hits_b", "planned_realised", "planned_hits", "mean_distance_m",
-                                            "realtime_factor", "damage_n_a", "damage_n_b", "decisions_a",
-                                            "decisions_b", "kind_share_a", "kind_share_b")})
-            log(f"{style} vs rl, seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), "
-                f"falls {s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
-                f"distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")
+            # spawn, not fork: the parent has torch's thread pool running (the tracker), which a
+            # forked child can deadlock on
+            with mp.get_context("spawn").Pool(len(jobs)) as pool:
+                rows = sorted((r for part in pool.map(_eval_rows, jobs) for r in part), key=lambda r: r["seed"])
         sc = np.array([r["score"] for r in rows])
         tot = lambda k: float(sum(r[k] for r in rows))  # noqa: E731
         out["styles"][style] = {
@@ -535,7 +560,6 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
             "damage_n_ig": tot("damage_n_a"), "damage_n_rl": tot("damage_n_b"),
             "kind_share_ig": _pooled_shares(rows, "a"), "kind_share_rl": _pooled_shares(rows, "b"),
         }
-        npc.close()
     return out
 
 
@@ -579,6 +603,7 @@ def main(argv: list[str] | None = None) -> int:
                         "no value: the shipped tracker/checkpoints/hit_model_cmu13.pt)")
     e.add_argument("--future", default="calibrated", choices=("calibrated", "kinematic", "none"),
                    help="with --hit-model: the later plies' values (tracker.hit_model.phys_fighter)")
+    e.add_argument("--workers", type=int, default=1, help="processes playing the bouts (same results)")
     e.add_argument("--root-assist", action="store_true")
     e.add_argument("--out", default=None, help="write the result as JSON")
     a = p.parse_args(argv)
@@ -596,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     res = evaluate_vs_rl(a.graph, a.rl, a.styles.split(","), a.bouts, a.seconds, a.depth, a.tracker, a.library,
                          seed0=a.seed0, root_assist=a.root_assist, log=lambda s: print(s, flush=True), first_ply=a.first_ply,
-                         hit_model=a.hit_model, future=a.future)
+                         hit_model=a.hit_model, future=a.future, workers=a.workers)
     summary = {k: v for k, v in res.items() if k != "styles"}
     summary["styles"] = {s: {k: v for k, v in d.items() if k != "bouts"} for s, d in res["styles"].items()}
     print(json.dumps(summary, indent=1))

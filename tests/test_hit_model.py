@@ -60,6 +60,18 @@ def test_calibrated_style_scales_the_hit_terms_by_the_held_out_realisation_rates
     assert c.kind_pref == st.kind_pref
 
 
+def test_kind_table_rates_per_action_kind():
+    from types import SimpleNamespace
+    from tracker.hit_model import kind_table
+    lib = SimpleNamespace(n_frames=[30, 15], labels=["jab", "guard"])
+    data = {"action": np.array([0, 0, 1, 1]), "y": np.array([[1, 0, 1], [0, 0, 0], [0, 1, 1], [0, 0, 0]])}
+    jab, guard = sorted(kind_table(data, lib), key=lambda r: r["kind"] != "jab")
+    assert (jab["n"], jab["mean_s"], jab["given"], jab["received"], jab["fell"]) == (2, 1.0, 0.5, 0.0, 0.5)
+    assert jab["falls_per_min"] == pytest.approx(30.0)          # one fall in 2 s of jabs
+    assert guard["falls_per_min"] == pytest.approx(60.0)        # one in 1 s of guard
+    assert "fell" not in kind_table({"action": data["action"], "y": data["y"][:, :2]}, lib)[0]
+
+
 def test_bad_sample_file_is_named(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")

@@ -29,6 +29,7 @@ not of every opponent; the later plies' calibration is one rate per head, not pe
     python -m tracker.hit_model collect --graph G.igz --bouts 240 --explore 0.4 --out r1.npz [--workers 2]
     python -m tracker.hit_model collect --graph G.igz --bouts 160 --seed0 2000 --explore 0.25 --hit-model M1.pt --future kinematic --out r2.npz
     python -m tracker.hit_model train --data r1.npz r2.npz ... --out tracker/checkpoints/hit_model_cmu13.pt   # + .png reliability plot
+    python -m tracker.hit_model kinds --data r1.npz ... --graph G.igz      # per action kind: landed, hit, falls
     igraph-fight fight --physics --graph G.igz --a infighter+phys --b rl ...      # the fighter; +phys:MODEL for another model
 """
 from __future__ import annotations
@@ -519,6 +520,26 @@ def train(data: dict, config: HitModelConfig = HitModelConfig(), n_actions: int 
     return model, report
 
 
+def kind_table(data: dict, library) -> list[dict]:
+    """Per action kind over collected samples: decisions, mean duration (s), share that landed a
+    hit, share hit while playing it, share with a fall in its span and falls per minute of its
+    time (the fall column needs data recorded with it)."""
+    a = data["action"].astype(np.int64)
+    y = data["y"]
+    dur = np.asarray(library.n_frames, dtype=np.float64)[a] / 30.0
+    labs = np.array([library.labels[i] for i in a])
+    out = []
+    for k in sorted(set(labs.tolist())):
+        m = labs == k
+        row = {"kind": k, "n": int(m.sum()), "mean_s": float(dur[m].mean()), "given": float(y[m, 0].mean()),
+               "received": float(y[m, 1].mean())}
+        if y.shape[1] > 2:
+            row["fell"] = float(y[m, 2].mean())
+            row["falls_per_min"] = float(60.0 * y[m, 2].sum() / dur[m].sum())
+        out.append(row)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m tracker.hit_model", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -534,6 +555,9 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--hit-model", default=None, help="IG fighters use this hit model (a further data round)")
     c.add_argument("--future", default="calibrated", choices=FUTURES)
     c.add_argument("--out", required=True)
+    k = sub.add_parser("kinds", help="per action kind: landed, hit while playing, falls (collected samples)")
+    k.add_argument("--data", required=True, nargs="+")
+    k.add_argument("--graph", required=True, help="the graph whose library the samples were collected on")
     t = sub.add_parser("train", help="fit the hit model on collected samples")
     t.add_argument("--data", required=True, nargs="+")
     t.add_argument("--out", required=True)
@@ -545,6 +569,17 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(r, indent=1))
         return 0
     parts = [load_data(p) for p in args.data]
+    if args.cmd == "kinds":
+        from igraph_fight.graph import load_graph
+        lib = load_graph(args.graph).load_library()
+        ny = min(d["y"].shape[1] for d in parts)
+        data = {"action": np.concatenate([d["action"] for d in parts]),
+                "y": np.concatenate([d["y"][:, :ny] for d in parts])}
+        for r in kind_table(data, lib):
+            print(f"{r['kind']:>13}: {r['n']:6d} decisions, {r['mean_s']:.2f} s, landed {r['given']:.3f}, hit while "
+                  f"playing {r['received']:.3f}" + (f", fall in span {r['fell']:.2f}, {r['falls_per_min']:.1f} falls per "
+                                                      "minute of it" if "fell" in r else ""))
+        return 0
     ny = min(d["y"].shape[1] for d in parts)          # early files have no fall column
     for d in parts:
         d["y"] = d["y"][:, :ny]

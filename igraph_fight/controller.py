@@ -843,6 +843,21 @@ class NPCController:
     def policy(self) -> Policy:
         return self._table.policy
 
+    @property
+    def style_def(self) -> Style:
+        """The live table's Style (weights, kind preferences)."""
+        return self._table.style_obj
+
+    @property
+    def action_kinds(self) -> np.ndarray:
+        """Kind index of each library action (into ``kind_names``; -1 for none)."""
+        return self._kinds
+
+    @property
+    def kind_names(self) -> list[str]:
+        """The kind names the graph's kind indices refer to."""
+        return [str(k) for k in self._arrays["kinds_table"]]
+
     def _swap_in(self, style: Style, depth: int, gamma: float | None, t_request: float) -> _Table:
         table = self._compute(style, depth, gamma)
         self._table = table  # one reference assignment: atomic for readers

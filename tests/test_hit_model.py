@@ -116,8 +116,10 @@ def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_grap
     mt0, p0, q0 = PhysIGAgent(npc, model(0.0)).scores(ctx)
     mt1, p1, q1 = PhysIGAgent(npc, model(80.0)).scores(ctx)
     j = int(np.nonzero(mt1[:, MT_ACTION] == a)[0][0])
-    st = npc._table.style_obj
-    pref = npc._table.la[2][npc._kinds[a]] if 0 <= npc._kinds[a] < len(npc._table.la[2]) else 1.0
+    st = npc.style_def
+    k = npc.action_kinds[a]
+    from planner import kind_preferences
+    pref = kind_preferences(st, npc.kind_names)[k] if k >= 0 else 1.0
     assert p1[j, 0] == pytest.approx(1.0) and p0[j, 0] == pytest.approx(0.0, abs=1e-12)
     assert q1[j] - q0[j] == pytest.approx(st.w_dmg_given * pref)
     others = np.arange(len(q0)) != j

@@ -39,7 +39,7 @@ import json
 import multiprocessing as mp
 import os
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +88,6 @@ class HitModelConfig:
     weight_decay: float = 1e-4
     holdout: float = 0.2          # share of bouts (by seed) held out for the report
     seed: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 class HitModel:
@@ -104,9 +103,9 @@ class HitModel:
     def predict(self, X: np.ndarray) -> np.ndarray:
         """(rows, 2) probabilities: column 0 given, column 1 received."""
         if self._layers is None:
+            mods = list(self.net) if hasattr(self.net, "__iter__") else [self.net]   # Sequential or one Linear
             self._layers = [(m.weight.detach().numpy().T.astype(np.float64), m.bias.detach().numpy().astype(np.float64))
-                            for m in self.net if hasattr(m, "weight")] if hasattr(self.net, "__iter__") else \
-                [(self.net.weight.detach().numpy().T.astype(np.float64), self.net.bias.detach().numpy().astype(np.float64))]
+                            for m in mods if hasattr(m, "weight")]
         h = (np.asarray(X, dtype=np.float64) - self.mean) / self.std
         for i, (W, b) in enumerate(self._layers):
             h = h @ W + b
@@ -193,8 +192,8 @@ class PhysIGAgent:
         self.style = style
         self.future = future
         self.value_scale = 0.0 if future == "none" else 1.0
-        self.name = name or f"{(style or controller._table.style_obj).name}({controller.depth}, phys)"
-        self.kinds = np.asarray(controller._kinds, dtype=np.int64)
+        self.name = name or f"{(style or controller.style_def).name}({controller.depth}, phys)"
+        self.kinds = np.asarray(controller.action_kinds, dtype=np.int64)
         self.n_kinds = int(model.meta["n_kinds"])
         self.decisions = 0
         self.off_graph = 0
@@ -212,8 +211,8 @@ class PhysIGAgent:
         X = feature_vector(ctx.obs, ctx.features, mt, int(self.kinds[int(ctx.obs.m_other)]), c.library.n_actions,
                            self.n_kinds)
         p = self.model.predict(X)
-        st = self.style or c._table.style_obj
-        pref = kind_preferences(st, [str(k) for k in c._arrays["kinds_table"]])
+        st = self.style or c.style_def
+        pref = kind_preferences(st, c.kind_names)
         k = self.kinds[mt[:, 0].astype(np.int64)]
         pk = np.where((k >= 0) & (k < len(pref)), pref[np.clip(k, 0, len(pref) - 1)], 1.0)
         q = (-mt[:, MT_POS] + st.w_dmg_given * pk * p[:, 0] - st.w_dmg_received * p[:, 1] + mt[:, MT_DEF]
@@ -281,7 +280,7 @@ class _Recorder:
             a = int(self.rng.choice(ctx.menu))
         mt = self.npc.menu_terms(ctx.obs)
         j = int(np.nonzero(mt[:, 0].astype(np.int64) == a)[0][0])
-        kinds = self.npc._kinds
+        kinds = self.npc.action_kinds
         x = feature_vector(ctx.obs, ctx.features, mt[j:j + 1], int(kinds[int(ctx.obs.m_other)]),
                            self.npc.library.n_actions, self.n_kinds)[0]
         self.rows.append((x, int(round(ctx.t_s * 30)), a, self.bout.F[ctx.k].n_inst + 1))

@@ -23,8 +23,8 @@ menu) against the RL baseline and other IG fighters, on seeds apart from the eva
 RL fighter's own decisions are samples too. Labels: ``given`` = the action instance produced a
 realised hit (tracker.judging); ``received`` = a realised hit on the fighter between its decision
 instant and the action's nominal end (``fell``, a fall in that span, is recorded, not modelled).
-Named approximations: the odds are those of the collection's opponents and exploration rate,
-not of every opponent; the later plies' calibration is one rate per head, not per state.
+Named approximations: the odds are those of the collection's opponents, exploration rate and
+tracking policy, not of every opponent or tracker; the later plies' calibration is one rate per head, not per state.
 
     python -m tracker.hit_model collect --graph G.igz --bouts 240 --explore 0.4 --out r1.npz [--workers 2]
     python -m tracker.hit_model collect --graph G.igz --bouts 160 --seed0 2000 --explore 0.25 --hit-model M1.pt --future kinematic --out r2.npz

@@ -723,12 +723,16 @@ class NPCController:
             "exact": the simulated one-step lookahead for every decision, or "exact2": two exact
             plies with the graph's values at the leaves (module docstring); act() only
             (act_batch answers from the table as before).
+        edge_features: replacement arrays for some of the graph's edge features (feat_*), used
+            for the policy table only (the exact plies simulate): e.g. damages as physically
+            expected instead of kinematically predicted (tracker.hit_model). Same length as the
+            graph's edges.
     """
 
     def __init__(self, graph: InteractionGraph | str | Path, library=None, style: Style | str | Path = "balanced",
                  depth: int = 5, gamma: float | None = None, stochastic: bool = False, temperature: float = 0.5,
                  usage_penalty: float = 0.0, seed: int = 0, offgraph: str = "lookahead",
-                 first_ply: str = "table") -> None:
+                 first_ply: str = "table", edge_features: dict | None = None) -> None:
         if offgraph not in ("lookahead", "nearest"):
             raise ValueError("offgraph must be 'lookahead' or 'nearest'")
         if first_ply not in FIRST_PLY:
@@ -746,6 +750,11 @@ class NPCController:
         self._arrays = dict(a)
         if "kinds_table" not in self._arrays:
             self._arrays["kinds_table"] = np.array(KINDS)
+        for k, v in (edge_features or {}).items():
+            if not k.startswith("feat_") or k not in self._arrays or len(v) != len(self._arrays[k]):
+                raise ValueError(f"edge_features: {k!r} is not one of the graph's edge features of "
+                                 f"{len(a['edge_target'])} edges")
+            self._arrays[k] = np.asarray(v)
         opts = graph.header.get("options", {})
         self.f0 = int(opts.get("f0", 3))
         s_r = float(opts.get("s_r_m", 0.5))

@@ -72,6 +72,26 @@ def test_kind_table_rates_per_action_kind():
     assert "fell" not in kind_table({"action": data["action"], "y": data["y"][:, :2]}, lib)[0]
 
 
+def test_physical_edge_features_expect_hits_at_the_measured_rates():
+    from tracker.hit_model import physical_edge_features
+    kind_names = ["jab", "guard"]
+    action_kinds = np.array([0, 0, 1])            # two jab actions, one guard
+    # per action: decisions / landed with a kinematic prediction, then without
+    rates = [[10, 2, 100, 5], [10, 3, 100, 5], [0, 0, 50, 0]]
+    m = HitModel(None, np.zeros(1), np.ones(1), {"action_rates": rates,
+                                                 "report": {"received": {"rate_when_kinematic_predicts": 0.2}}})
+    arrays = {"feat_kind": np.array([0, 0, 1, -1]), "feat_dmg_given": np.array([2.0, 0.0, 0.0, 1.0], np.float32),
+              "feat_dmg_received": np.array([0.0, 1.0, 3.0, 0.0], np.float32)}
+    f = physical_edge_features(arrays, m, action_kinds, kind_names)
+    # a predicted jab hit: 5/20 of it; a jab the simulator says misses: 10/200; a guard: nothing;
+    # an edge without a kind keeps its value
+    assert f["feat_dmg_given"] == pytest.approx([0.5, 0.05, 0.0, 1.0])
+    assert f["feat_dmg_received"] == pytest.approx([0.0, 0.2, 0.6, 0.0])
+    assert f["feat_dmg_given"].dtype == np.float32
+    with pytest.raises(ValueError, match="per-action rates"):
+        physical_edge_features(arrays, HitModel(None, np.zeros(1), np.ones(1), {}), action_kinds, kind_names)
+
+
 def test_bad_sample_file_is_named(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
@@ -180,5 +200,14 @@ def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(
     agent.set_style("outboxer")                                # a run-time swap keeps the calibration
     assert agent.style.name == "outboxer" and agent.controller.style == "outboxer~phys"
     agent.controller.close()
+    from tracker.hit_model import phys_fighter                 # damages as physically expected
+    pf = phys_fighter(str(tiny_graph_file), boxing_library, "infighter", 2, m, future="physical")
+    g = pf.controller.graph.arrays
+    strike = np.isin(g["feat_kind"], [0, 1]) & (g["feat_dmg_given"] == 0)    # jabs / straights the simulator says miss
+    assert strike.any() and (pf.controller._arrays["feat_dmg_given"][strike] > 0).all()
+    pf.controller.close()
+    from igraph_fight.controller import NPCController
+    with pytest.raises(ValueError, match="edge_features"):
+        NPCController(str(tiny_graph_file), boxing_library, edge_features={"feat_dmg_given": np.zeros(3)})
     with pytest.raises(ValueError, match="STYLE\\+phys"):
         make_agent("infighter+magic", str(tiny_graph_file), boxing_library, 2)

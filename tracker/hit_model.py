@@ -15,8 +15,10 @@ the kinematic damage terms of its first ply:
 where V is the policy table's value where the action lands. ``phys_fighter(future=...)`` picks
 that table: "calibrated" (default) computes it for the style with its hit weights scaled by how
 often a kinematically predicted hit was realised in the model's held-out bouts, so the later
-plies expect hits at their physical rate; "kinematic" uses the style's own table; "none" drops
-V (the first ply alone). Measured against the physics RL baseline in tracker/BOUTS.md.
+plies expect hits at their physical rate; "physical" keeps the style's weights and replaces the
+graph's damage features by physically expected ones (per attack kind, including the strikes the
+simulator says miss, which land too); "kinematic" uses the style's own table; "none" drops V
+(the first ply alone). Measured against the physics RL baseline in tracker/BOUTS.md.
 
 Data come from bouts with exploration (a share of each IG fighter's decisions uniform over its
 menu) against the RL baseline and other IG fighters, on seeds apart from the evaluation's; the
@@ -152,7 +154,37 @@ def load_hit_model(path: str | os.PathLike | None = None) -> HitModel:
 
 
 #: how PhysIGAgent values the plies after the first (the graph's policy values where an action lands)
-FUTURES = ("calibrated", "kinematic", "none")
+FUTURES = ("calibrated", "physical", "kinematic", "none")
+
+
+def physical_edge_features(graph_arrays, model: HitModel, action_kinds, kind_names) -> dict:
+    """The graph's damage features as physically expected (``future="physical"``): an edge whose
+    event the kinematic simulator says lands dg damage expects rate_hit(kind) * dg, a strike it
+    says misses still expects rate_miss(kind) (strikes land without a kinematic prediction too),
+    and damage received is scaled by the received rate when predicted. Rates per attack kind from
+    the model's training data (meta ``action_rates``: per action, decisions and landed with and
+    without a kinematic prediction), pooled over the kind's actions."""
+    from motion_graph.classify import ATTACK_KINDS
+    ar = np.asarray(model.meta.get("action_rates", []), dtype=np.float64)
+    if ar.ndim != 2 or ar.shape[0] != len(action_kinds):
+        raise ValueError("hit model has no per-action rates (retrain it with this version) for future='physical'")
+    kinds = np.asarray(action_kinds, dtype=np.int64)
+    nk = len(kind_names)
+    tot = ar.sum(0)
+    hit, miss = np.zeros(nk), np.zeros(nk)
+    for k in range(nk):
+        s = ar[kinds == k].sum(0)
+        hit[k] = s[1] / s[0] if s[0] > 0 else tot[1] / max(tot[0], 1)
+        miss[k] = s[3] / s[2] if s[2] > 0 and kind_names[k] in ATTACK_KINDS else 0.0
+    fk = np.asarray(graph_arrays["feat_kind"], dtype=np.int64)
+    ok = (fk >= 0) & (fk < nk)
+    fkc = np.clip(fk, 0, nk - 1)
+    dg = np.asarray(graph_arrays["feat_dmg_given"], dtype=np.float64)
+    given = np.where(ok, np.where(dg > 0, hit[fkc] * dg, miss[fkc]), dg)
+    rr = float(model.meta["report"]["received"]["rate_when_kinematic_predicts"])
+    received = rr * np.asarray(graph_arrays["feat_dmg_received"], dtype=np.float64)
+    return {"feat_dmg_given": given.astype(graph_arrays["feat_dmg_given"].dtype),
+            "feat_dmg_received": received.astype(graph_arrays["feat_dmg_received"].dtype)}
 
 
 def calibrated_style(style, model: HitModel):
@@ -238,8 +270,10 @@ class PhysIGAgent:
 def phys_fighter(graph, library, style, depth: int, model: HitModel | str | None = None,
                  future: str = "calibrated") -> PhysIGAgent:
     """A PhysIGAgent for a style (name, file or Style): ``future`` "calibrated" (the policy table of
-    calibrated_style: later plies expect hits at the physical rate), "kinematic" (the style's own
-    table) or "none" (no later plies: the first ply alone)."""
+    calibrated_style: later plies expect hits at the physical rate), "physical" (the style's own
+    weights over physical_edge_features: per-kind rates, and strikes the simulator says miss
+    still expect their measured rate), "kinematic" (the style's own table) or "none" (no later
+    plies: the first ply alone)."""
     from igraph_fight.controller import NPCController
     from planner import Style, load_style
     if future not in FUTURES:
@@ -247,8 +281,18 @@ def phys_fighter(graph, library, style, depth: int, model: HitModel | str | None
     hm = model if isinstance(model, HitModel) else load_hit_model(model)
     st = style if isinstance(style, Style) else load_style(style)
     table_style = calibrated_style(st, hm) if future == "calibrated" else st
-    npc = NPCController(graph, library, style=table_style, depth=depth)
+    feats = None
+    if future == "physical":
+        from igraph_fight.graph import InteractionGraph, load_graph
+        from motion_graph.classify import KINDS
+        g = graph if isinstance(graph, InteractionGraph) else load_graph(graph)
+        graph = g
+        lib = library if library is not None else g.load_library()
+        names = [str(k) for k in g.arrays.get("kinds_table", KINDS)]
+        feats = physical_edge_features(g.arrays, hm, np.asarray(lib.kinds, dtype=np.int64), names)
+    npc = NPCController(graph, library, style=table_style, depth=depth, edge_features=feats)
     tag = "" if future == "calibrated" else f", future {future}"
+    # (set_style keeps edge_features: they live in the controller's arrays)
     return PhysIGAgent(npc, hm, name=f"{st.name}({depth}, phys{tag})", style=st, future=future)
 
 
@@ -491,6 +535,14 @@ def train(data: dict, config: HitModelConfig = HitModelConfig(), n_actions: int 
             "config": asdict(config), "data": data.get("meta", {}), "samples": int(len(X)),
             "train_samples": int(tr.sum()), "held_out_seeds": [int(s) for s in held]}
     model = HitModel(net, mean, std, meta)
+    # per action: decisions and landed with / without a kinematic prediction (all samples)
+    act = data["action"].astype(np.int64)
+    kin = X[:, n_act + _FT_USED.index(5)] > 0
+    ar = np.zeros((n_act, 4))
+    for cols, m in (((0, 1), kin), ((2, 3), ~kin)):
+        np.add.at(ar[:, cols[0]], act[m], 1.0)
+        np.add.at(ar[:, cols[1]], act[m], y[m, 0])
+    meta["action_rates"] = ar.tolist()
     report = {}
     if te.any():
         p = model.predict(X[te])

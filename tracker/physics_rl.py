@@ -601,7 +601,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--hit-model", nargs="?", const="default", default=None, metavar="MODEL",
                    help="IG fighters score their first ply with physically measured hit odds (tracker.hit_model; "
                         "no value: the shipped tracker/checkpoints/hit_model_cmu13.pt)")
-    e.add_argument("--future", default="calibrated", choices=("calibrated", "kinematic", "none"),
+    from .hit_model import FUTURES
+    e.add_argument("--future", default="calibrated", choices=FUTURES,
                    help="with --hit-model: the later plies' values (tracker.hit_model.phys_fighter)")
     e.add_argument("--workers", type=int, default=1, help="processes playing the bouts (same results)")
     e.add_argument("--root-assist", action="store_true")

@@ -54,6 +54,10 @@ class IGAgent:
         self.decisions = 0
         self.off_graph = 0
 
+    def set_style(self, style) -> None:
+        """Switch style at run time (the policy table recomputed; blocks until it is live)."""
+        self.controller.set_style(style, wait=True)
+
     def decide(self, ctx: DecisionContext) -> int:
         d = self.controller.act(ctx.obs)
         self.decisions += 1

@@ -45,14 +45,11 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     if swap_a is not None:
         t_sw, st = swap_a
         a0 = agents[0]
-        if not hasattr(a0, "controller"):
+        if not hasattr(a0, "set_style"):
             raise ValueError("--swap-a needs an Interaction Graph fighter as A")
 
         def do_swap() -> None:
-            if hasattr(a0, "set_style"):          # tracker.hit_model.PhysIGAgent
-                a0.set_style(st)
-            else:
-                a0.controller.set_style(st, wait=True)
+            a0.set_style(st)
             a0.name = f"{a0.name}->{st}"
 
         bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))

@@ -229,6 +229,7 @@ class PhysIGAgent:
         self.n_kinds = int(model.meta["n_kinds"])
         self.decisions = 0
         self.off_graph = 0
+        self._pref = (None, None)      # (style, its kind preferences)
 
     def reset(self, bout, k, rng) -> None:
         self.decisions = 0
@@ -244,7 +245,9 @@ class PhysIGAgent:
                            self.n_kinds)
         p = self.model.predict(X)
         st = self.style or c.style_def
-        pref = kind_preferences(st, c.kind_names)
+        if self._pref[0] is not st:
+            self._pref = (st, kind_preferences(st, c.kind_names))
+        pref = self._pref[1]
         k = self.kinds[mt[:, 0].astype(np.int64)]
         pk = np.where((k >= 0) & (k < len(pref)), pref[np.clip(k, 0, len(pref) - 1)], 1.0)
         q = (-mt[:, MT_POS] + st.w_dmg_given * pk * p[:, 0] - st.w_dmg_received * p[:, 1] + mt[:, MT_DEF]
@@ -364,25 +367,23 @@ def _collect_worker(args: tuple) -> dict:
     lib = g.load_library()
     setup = BoutSetup.create(lib)
     trk = load_tracker(tracker)
-    npcs = {s: NPCController(g, lib, style=s, depth=5) for s in ("infighter", "outboxer")}
     rl = load_rl_agent(rl_ckpt, lib)
     nf = np.asarray(lib.n_frames, dtype=np.int64)
-    if hit_model:
-        hm = load_hit_model(hit_model)
-        phys = {s: phys_fighter(g, lib, s, 5, hm, future) for s in npcs}
-
-    def fighter(style: str):
-        return phys[style] if hit_model else IGAgent(npcs[style])
-
+    hm = load_hit_model(hit_model) if hit_model else None
+    # one fighter per style; its controller also gives the recorded kinematic terms (their raw
+    # sim.FT_* columns, the only ones recorded, do not depend on the style)
+    fighters = {s: phys_fighter(g, lib, s, 5, hm, future) if hm is not None
+                else IGAgent(NPCController(g, lib, style=s, depth=5)) for s in ("infighter", "outboxer")}
     X, Y, A, S, who = [], [], [], [], []
     for seed in seeds:
         style = ("infighter", "outboxer")[seed % 2]
-        a = _Recorder(fighter(style), npcs[style], explore, len(KINDS))
+        fa = fighters[style]
+        a = _Recorder(fa, fa.controller, explore, len(KINDS))
         if seed % 3 == 2:
-            other = ("outboxer", "infighter")[seed % 2]
-            b = _Recorder(fighter(other), npcs[other], explore, len(KINDS))
+            fb = fighters[("outboxer", "infighter")[seed % 2]]
+            b = _Recorder(fb, fb.controller, explore, len(KINDS))
         else:
-            b = _Recorder(rl, npcs[style], 0.0, len(KINDS))
+            b = _Recorder(rl, fa.controller, 0.0, len(KINDS))
         bout = PhysicsBout(setup, [a, b], trk, BoutConfig(seconds=seconds, record_qpos=False))
         bout.run(seed=seed)
         for k, rec in enumerate((a, b)):
@@ -393,8 +394,8 @@ def _collect_worker(args: tuple) -> dict:
             S += [seed] * len(x)
             who += [0 if hasattr(rec.inner, "controller") else 1] * len(x)
         print(f"[worker {wid}] seed {seed}: {len(bout.hit_events)} hits, {len(X)} samples", file=sys.stderr, flush=True)
-    for n in list(npcs.values()) + ([f.controller for f in phys.values()] if hit_model else []):
-        n.close()
+    for f in fighters.values():
+        f.controller.close()
     return {"X": np.array(X), "y": np.array(Y, dtype=np.int8), "action": np.array(A), "seed": np.array(S),
             "rl": np.array(who, dtype=np.int8)}
 
@@ -636,12 +637,11 @@ def main(argv: list[str] | None = None) -> int:
         d["y"] = d["y"][:, :ny]
     data = {k: np.concatenate([d[k] for d in parts]) for k in ("X", "y", "action", "seed", "rl")}
     data["meta"] = [d["meta"] for d in parts]
-    cfg = HitModelConfig()
-    for kv in args.set:
-        k, _, v = kv.partition("=")
-        if not hasattr(cfg, k):
-            raise SystemExit(f"unknown HitModelConfig field {k!r}")
-        setattr(cfg, k, type(getattr(cfg, k))(json.loads(v)) if not isinstance(getattr(cfg, k), str) else v)
+    from .overrides import parse_config_overrides
+    try:
+        cfg = HitModelConfig(**parse_config_overrides(args.set, HitModelConfig))
+    except ValueError as exc:
+        ap.error(str(exc))
     model, report = train(data, cfg)
     model.save(args.out)
     if report:

@@ -482,9 +482,10 @@ _ROW_KEYS = ("seed", "score", "hits_a", "hits_b", "falls_a", "falls_b", "planned
              "decisions_a", "decisions_b", "kind_share_a", "kind_share_b")
 
 
-def _eval_rows(job: tuple, log=None) -> list[dict]:
+def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
     """One style's bouts for the given seeds (a worker of evaluate_vs_rl; bouts depend on their
-    seed only, so any split of the seeds gives the same rows)."""
+    seed only, so any split of the seeds gives the same rows). ``trk``: the tracking controller
+    when the caller has it loaded already."""
     (graph, library, rl_ckpt, tracker, root_assist, style, depth, first_ply, hit_model, future, seconds, seeds) = job
     if log is None:
         import torch
@@ -499,7 +500,7 @@ def _eval_rows(job: tuple, log=None) -> list[dict]:
     g = load_graph(graph)
     lib = _library_from(None, library) if library else g.load_library()
     setup = BoutSetup.create(lib, root_assist=root_assist)
-    trk = load_tracker(tracker)
+    trk = trk if trk is not None else load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
     if hit_model:
         from .hit_model import load_hit_model, phys_fighter
@@ -543,7 +544,7 @@ def evaluate_vs_rl(graph: str, rl_ckpt: str | None, styles: list[str], n_bouts: 
         jobs = [(graph, library, rl_ckpt, tracker, root_assist, style, depth, first_ply, hit_model, future, seconds,
                  seeds[i::workers]) for i in range(max(1, workers)) if seeds[i::workers]]
         if len(jobs) <= 1:
-            rows = _eval_rows(jobs[0], log) if jobs else []
+            rows = _eval_rows(jobs[0], log, trk) if jobs else []
         else:
             # spawn, not fork: the parent has torch's thread pool running (the tracker), which a
             # forked child can deadlock on

@@ -144,11 +144,15 @@ class VirtualForceBalance:
         self.fighters = [_Fighter(env.model, f) for f in env.scene.fighters]
         self.gains: list[BalanceGains | None] = [None] * len(self.fighters)
         self.floor = env.scene.floor_geom
-        self.geom_owner = {}
+        # geom id -> 2 * fighter + side (0 left, 1 right) of a foot geom, -1 for any other geom
+        self._owner = np.full(env.model.ngeom + 1, -1, dtype=np.int64)
         for k, fi in enumerate(self.fighters):
-            for s, leg in fi.legs.items():
-                for g in leg["geoms"]:
-                    self.geom_owner[int(g)] = (k, s)
+            for i, (s, leg) in enumerate(fi.legs.items()):
+                self._owner[leg["geoms"]] = 2 * k + i
+                leg["kp"] = np.maximum(env.model.actuator_gainprm[leg["acts"], 0], 1e-9)
+        self._sides = [tuple(fi.legs) for fi in self.fighters]
+        self.geom_owner = {int(g): (k, s) for k, fi in enumerate(self.fighters)      # per contact, for probes
+                           for s, leg in fi.legs.items() for g in leg["geoms"]}
         self._frames = [_RefFrame(env.model) for _ in self.fighters]
         self._base = np.zeros(env.model.nu)
         self._jp = np.zeros((3, env.model.nv))
@@ -168,6 +172,17 @@ class VirtualForceBalance:
         share = 1.0 / len(feet)
         return [(side, F * share, T * share) for side in feet]
 
+    def stance_feet(self, d: mujoco.MjData) -> list[list[str]]:
+        """Per fighter, the sides ("l", "r", sorted) whose foot geoms touch the floor now."""
+        out: list[list[str]] = [[] for _ in self.fighters]
+        if d.ncon:
+            g = d.contact.geom[:d.ncon]
+            other = np.where(g[:, 0] == self.floor, g[:, 1], np.where(g[:, 1] == self.floor, g[:, 0], -1))
+            for code in sorted(set(self._owner[other].tolist())):     # codes ascending: sides sorted
+                if code >= 0:
+                    out[code // 2].append(self._sides[code // 2][code % 2])
+        return out
+
     def substep(self, env, d: mujoco.MjData, s: int) -> None:
         """After physics substep ``s`` of a control step: set the leg targets for the next substep."""
         m = self.model
@@ -177,17 +192,7 @@ class VirtualForceBalance:
             for k, g in enumerate(self.gains):
                 if g is not None:
                     self._frames[k].update(env.scene.fighters[k], self.fighters[k], env.refs[k], t)
-        stance: list[set] = [set() for _ in self.fighters]
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.geom1 == self.floor:
-                o = self.geom_owner.get(int(c.geom2))
-            elif c.geom2 == self.floor:
-                o = self.geom_owner.get(int(c.geom1))
-            else:
-                o = None
-            if o is not None:
-                stance[o[0]].add(o[1])
+        stance = self.stance_feet(d)
         need = [k for k, g in enumerate(self.gains) if g is not None and stance[k]]
         for k, fi in enumerate(self.fighters):
             if self.gains[k] is not None:
@@ -198,11 +203,13 @@ class VirtualForceBalance:
         mujoco.mj_subtreeVel(m, d)
         for k in need:
             g, fi, tr = self.gains[k], self.fighters[k], self._frames[k]
-            feet = sorted(stance[k])
+            feet = stance[k]
             c = d.subtree_com[fi.pelvis]
             v = d.subtree_linvel[fi.pelvis]
-            fs = np.mean([d.geom_xpos[fi.legs[side]["geoms"], :2].mean(0) for side in feet], axis=0)
-            fr = np.mean([tr.feet[side] for side in feet], axis=0)
+            # (the same arithmetic as np.mean over the geoms, then over the feet, without its overhead)
+            cen = [d.geom_xpos[fi.legs[side]["geoms"], :2].sum(0) / len(fi.legs[side]["geoms"]) for side in feet]
+            fs = cen[0] if len(feet) == 1 else (cen[0] + cen[1]) / 2
+            fr = tr.feet[feet[0]] if len(feet) == 1 else (tr.feet[feet[0]] + tr.feet[feet[1]]) / 2
             F = np.zeros(3)
             F[:2] = g.com_kp * ((tr.com[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] - v[:2])
             if g.drift_kp:
@@ -221,4 +228,4 @@ class VirtualForceBalance:
                 tau = -(self._jp[:, cols].T @ Fs + self._jr[:, cols].T @ Ts)
                 np.clip(tau, -g.torque_clip, g.torque_clip, out=tau)
                 ids = leg["acts"]
-                d.ctrl[ids] = self._base[ids] + tau / np.maximum(m.actuator_gainprm[ids, 0], 1e-9)
+                d.ctrl[ids] = self._base[ids] + tau / leg["kp"]

@@ -4,6 +4,7 @@
     python benchmarks/tracker_ground_probes.py ground [--walks N] [--controllers pd,layer,policy] [--no-com]
                                                       [--stance-height M]
     python benchmarks/tracker_ground_probes.py recover [--walks N] [--threshold M]
+    python benchmarks/tracker_ground_probes.py guard --graph G.igz [--bouts N] [--plant]
 
 Walks: random 20-action library walks of seed 100 (the tuning seed); no force on the root.
 Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the shipped policy
@@ -30,6 +31,10 @@ Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the 
   translation and legs by the IK, centre of mass over the soles) for 1 s, blended back over 8
   frames into the walk at the frame it left. Seconds up (a walk ends at 30 s or at its end),
   walk seconds covered, recoveries and seconds spent in them; ``--threshold 100`` never triggers.
+- guard: physics bouts (60 s, seeds 0.., infighter+phys against the RL baseline); with ``--plant``
+  every guard action of the library (both fighters play library actions) is replaced by a planted
+  statue of its first frame (the statue probe's IK, root rotation free) held for the action's
+  length. Falls per minute, score, hits, mean distance.
 """
 from __future__ import annotations
 
@@ -428,19 +433,67 @@ def recover(walks: int, threshold: float) -> None:
           f"{v[:, 2].mean():.2f} s, {v[:, 3].mean():.1f} recoveries, {v[:, 4].mean():.2f} s in recovery")
 
 
+def guard(graph: str, bouts: int, plant: bool) -> None:
+    from igraph_fight.graph import load_graph
+    from motion_graph.classify import KINDS
+    from tracker.bout import PhysicsBout
+    from tracker.bout_agents import load_tracker, make_agent
+    from tracker.bout_setup import BoutConfig, BoutSetup, _yaws
+    from tracker.policy import _ref_balance
+    g = load_graph(graph)
+    lib = g.load_library()
+    setup = BoutSetup.create(lib)
+    trk = load_tracker(None)
+    if plant:
+        fm = setup.scene.fighters[0]
+        ik = Grounder(setup.scene, fm, GroundConfig(com=False), free_root_rotation=True)
+        for a in np.nonzero(np.asarray(lib.kinds) == KINDS.index("guard"))[0]:
+            c = setup.action_reference(int(a))
+            plan = {}
+            ik._pose(c["qpos"][0])
+            for sd in "lr":
+                h, b, _ = ik._points(sd)
+                plan[sd] = dict(stance=np.ones(1, bool), heel=h[None], ball=b[None])
+            plan["com"] = np.array([ik.d.geom_xpos[x][:2] for sd in "lr" for x in ik.spheres[sd]["all"]]).mean(0)[None]
+            q = np.repeat(ik.solve(c["qpos"][:1], plan), len(c["qpos"]), 0)
+            r = as_reference(Reference(30.0, c["qpos"], c["qvel"], c["ctrl"], c["ctrl_vel"], c["sites"],
+                                       FootPenetration.from_depths(np.zeros(1))), setup.scene, fm, q)
+            setup._refs[int(a)] = {"qpos": r.qpos, "qvel": r.qvel, "ctrl": r.ctrl, "ctrl_vel": r.ctrl_vel,
+                                   "sites": r.sites, "balance": _ref_balance(setup.env, 0, r),
+                                   "yaw": _yaws(r.qpos[:, 3:7], setup.env._cache[0].lateral)}
+    rows = []
+    for seed in range(bouts):
+        agents = [make_agent("infighter+phys", g, lib, 5), make_agent("rl", g, lib, 5)]
+        s = PhysicsBout(setup, agents, trk, BoutConfig(seconds=60, record_qpos=False)).run(seed=seed).summary()
+        rows.append(s)
+        print(f"seed {seed}: score {s['score']:+.0f} ({s['hits_a']:.0f}-{s['hits_b']:.0f}), falls {s['falls_a']}-{s['falls_b']}, "
+              f"distance {s['mean_distance_m']:.2f} m", flush=True)
+    mean = lambda k: float(np.mean([r[k] for r in rows]))  # noqa: E731
+    print(f"{'planted' if plant else 'mocap'} guard, {bouts} bouts: falls per minute IG {mean('falls_a'):.2f}, "
+          f"RL {mean('falls_b'):.2f}; score {mean('score'):+.2f}; hits {sum(r['hits_a'] for r in rows):.0f} - "
+          f"{sum(r['hits_b'] for r in rows):.0f}; distance {mean('mean_distance_m'):.2f} m")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("probe", choices=("statue", "ground", "recover"))
+    ap.add_argument("probe", choices=("statue", "ground", "recover", "guard"))
     ap.add_argument("--frames", default="0,30,60,90,120")
     ap.add_argument("--walks", type=int, default=24)
     ap.add_argument("--controllers", default="pd,layer,policy")
     ap.add_argument("--no-com", action="store_true", help="plant the feet only (no centre-of-mass shift)")
     ap.add_argument("--stance-height", type=float, default=GroundConfig.stance_height_m)
     ap.add_argument("--threshold", type=float, default=0.18, help="recover: trigger (metres)")
+    ap.add_argument("--graph", default=None, help="guard: the graph file")
+    ap.add_argument("--bouts", type=int, default=6, help="guard: bouts")
+    ap.add_argument("--plant", action="store_true", help="guard: plant the guard actions")
     a = ap.parse_args(argv)
     t0 = time.time()
     if a.probe == "statue":
         statue([int(x) for x in a.frames.split(",")])
+    elif a.probe == "guard":
+        if not a.graph:
+            ap.error("guard needs --graph")
+        guard(a.graph, a.bouts, a.plant)
     elif a.probe == "recover":
         recover(a.walks, a.threshold)
     else:

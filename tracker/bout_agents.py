@@ -101,11 +101,12 @@ def load_tracker(spec: str | None = None):
     return load_policy(spec)
 
 
-def make_agent(spec: str, graph, library, depth: int):
-    """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``;
-    ``STYLE+phys`` or ``STYLE+phys:MODEL`` the IG fighter whose first ply uses physically measured
-    hit odds (tracker.hit_model; default the shipped model); ``rl`` or ``rl:CKPT`` the physics RL
-    baseline (tracker.physics_rl)."""
+def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", future: str = "calibrated"):
+    """An agent from a name: a style (preset name or style file) gives an IG fighter at ``depth``
+    (its NPCController's ``first_ply``); ``STYLE+phys`` or ``STYLE+phys:MODEL`` the IG fighter
+    whose first ply uses physically measured hit odds (tracker.hit_model; default the shipped
+    model; later plies by ``future``); ``rl`` or ``rl:CKPT`` the physics RL baseline
+    (tracker.physics_rl)."""
     if spec == "rl" or spec.startswith("rl:"):
         from .physics_rl import load_rl_agent
         return load_rl_agent(spec[3:] or None, library)
@@ -116,6 +117,6 @@ def make_agent(spec: str, graph, library, depth: int):
         if kind != "phys":
             raise ValueError(f"unknown fighter option {opt!r} in {spec!r} (STYLE+phys[:MODEL])")
         from .hit_model import phys_fighter
-        return phys_fighter(graph, library, style, depth, model or None)
-    npc = NPCController(graph, library, style=spec, depth=depth)
-    return IGAgent(npc, f"{npc.style}({depth})")
+        return phys_fighter(graph, library, style, depth, model or None, future)
+    npc = NPCController(graph, library, style=spec, depth=depth, first_ply=first_ply)
+    return IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")

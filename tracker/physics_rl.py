@@ -491,24 +491,19 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
         import torch
         torch.set_num_threads(1)
         log = lambda s: print(s, flush=True)  # noqa: E731
-    from igraph_fight.controller import NPCController
     from igraph_fight.graph import load_graph
 
     from .bout import PhysicsBout
-    from .bout_agents import IGAgent, load_tracker
+    from .bout_agents import load_tracker, make_agent
     from .bout_setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = _library_from(None, library) if library else g.load_library()
     setup = BoutSetup.create(lib, root_assist=root_assist)
     trk = trk if trk is not None else load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
-    if hit_model:
-        from .hit_model import load_hit_model, phys_fighter
-        ig = phys_fighter(g, lib, style, depth, load_hit_model(None if hit_model == "default" else hit_model), future)
-        npc = ig.controller
-    else:
-        npc = NPCController(g, lib, style=style, depth=depth, first_ply=first_ply)
-        ig = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
+    spec = style if not hit_model else f"{style}+phys" + ("" if hit_model == "default" else f":{hit_model}")
+    ig = make_agent(spec, g, lib, depth, first_ply=first_ply, future=future)
+    npc = ig.controller
     rows = []
     for seed in seeds:
         bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))

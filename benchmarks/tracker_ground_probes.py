@@ -5,6 +5,7 @@
                                                       [--stance-height M]
     python benchmarks/tracker_ground_probes.py recover [--walks N] [--threshold M]
     python benchmarks/tracker_ground_probes.py guard --graph G.igz [--bouts N] [--plant]
+    python benchmarks/tracker_ground_probes.py speed [--walks N] [--speeds 1,0.8,0.6]
 
 Walks: random 20-action library walks of seed 100 (the tuning seed); no force on the root.
 Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the shipped policy
@@ -35,6 +36,8 @@ Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the 
   every guard action of the library (both fighters play library actions) is replaced by a planted
   statue of its first frame (the statue probe's IK, root rotation free) held for the action's
   length. Falls per minute, score, hits, mean distance.
+- speed: the walks played slower (the motion resampled to 30 / speed fps and tracked at 30 Hz):
+  time to fall and the motion's seconds covered before it, PD + layer and the shipped policy.
 """
 from __future__ import annotations
 
@@ -474,9 +477,28 @@ def guard(graph: str, bouts: int, plant: bool) -> None:
           f"{sum(r['hits_b'] for r in rows):.0f}; distance {mean('mean_distance_m'):.2f} m")
 
 
+def speed(walks: int, speeds: list[float]) -> None:
+    from motion_graph.motion import Motion
+    from tracker.reference import build_reference
+    setup = make_setup(walk_source(None))
+    ctrls = controllers(["layer", "policy"])
+    res = {(n, s): [] for n in ctrls for s in speeds}
+    for w in draw_walks(setup.source, walks, 20, SEED):
+        mo = setup.source.sequence_motion(w, 4)
+        for s in speeds:
+            slow = mo.resample(30.0 / s)
+            ref = build_reference(Motion(slow.skeleton, slow.rotations, slow.root_positions, 30.0,
+                                         slow.local_translations, slow.source), setup.scene, 0, lift="auto")
+            for n, c in ctrls.items():
+                track_reference(setup.env, c, ref)
+                res[(n, s)].append(setup.env.sim_time)
+    for (n, s), v in res.items():
+        print(f"{n}, speed {s}: time to fall {np.mean(v):.3f} s, motion covered {np.mean(v) * s:.3f} s")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("probe", choices=("statue", "ground", "recover", "guard"))
+    ap.add_argument("probe", choices=("statue", "ground", "recover", "guard", "speed"))
     ap.add_argument("--frames", default="0,30,60,90,120")
     ap.add_argument("--walks", type=int, default=24)
     ap.add_argument("--controllers", default="pd,layer,policy")
@@ -486,6 +508,7 @@ def main(argv=None) -> int:
     ap.add_argument("--graph", default=None, help="guard: the graph file")
     ap.add_argument("--bouts", type=int, default=6, help="guard: bouts")
     ap.add_argument("--plant", action="store_true", help="guard: plant the guard actions")
+    ap.add_argument("--speeds", default="1,0.8,0.6", help="speed: playback speeds")
     a = ap.parse_args(argv)
     t0 = time.time()
     if a.probe == "statue":
@@ -494,6 +517,8 @@ def main(argv=None) -> int:
         if not a.graph:
             ap.error("guard needs --graph")
         guard(a.graph, a.bouts, a.plant)
+    elif a.probe == "speed":
+        speed(a.walks, [float(x) for x in a.speeds.split(",")])
     elif a.probe == "recover":
         recover(a.walks, a.threshold)
     else:

@@ -96,3 +96,35 @@ def test_two_fighters_and_learned_config(setup, tmp_path):
     ck["config"]["arm_velocity_targets"] = True           # a policy trained with arm velocity targets
     LearnedController(ck).reset(env)
     assert env.arm_velocity_targets is True
+
+
+def test_stance_feet_match_a_scan_of_every_contact(setup):
+    """The layer's vectorised stance test agrees with reading each contact, for two fighters, on
+    states where one, both or no feet touch (a walk's first second, then a topple)."""
+    from tracker.env import TrackingEnv
+    from tracker.model import build_fighter_scene
+    from tracker.reference import build_reference, placement_transform
+    scene = build_fighter_scene(setup.spec, 2)
+    env = TrackingEnv(scene, setup.config)
+    walks = draw_walks(setup.source, 2, 4, 11)
+    refs = [build_reference(setup.source.sequence_motion(w), scene, k, fps=30.0, placement=placement_transform(dx=3.0 * k))
+            for k, w in enumerate(walks)]
+    env.reset(refs, 0)
+    PDController.balanced().reset(env)
+    layer, d = env.balance, env.data
+    seen = set()
+    for _ in range(60):
+        env.step(env.reference_targets())
+        if env.done:
+            break
+        want: list[set] = [set(), set()]
+        for i in range(d.ncon):
+            g1, g2 = int(d.contact[i].geom[0]), int(d.contact[i].geom[1])
+            other = g2 if g1 == scene.floor_geom else g1 if g2 == scene.floor_geom else None
+            if other in layer.geom_owner:
+                k, side = layer.geom_owner[other]
+                want[k].add(side)
+        got = layer.stance_feet(d)
+        assert got == [sorted(w) for w in want]
+        seen.update(len(g) for g in got)
+    assert {1, 2} <= seen          # single and double support both occurred

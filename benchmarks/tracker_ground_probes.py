@@ -6,6 +6,7 @@
     python benchmarks/tracker_ground_probes.py recover [--walks N] [--threshold M]
     python benchmarks/tracker_ground_probes.py guard --graph G.igz [--bouts N] [--plant]
     python benchmarks/tracker_ground_probes.py speed [--walks N] [--speeds 1,0.8,0.6]
+    python benchmarks/tracker_ground_probes.py legs [--walks N]
 
 Walks: random 20-action library walks of seed 100 (the tuning seed); no force on the root.
 Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the shipped policy
@@ -38,6 +39,9 @@ Controllers: PD, PD + the balance layer (tracker/vforce.py, default gains), the 
   length. Falls per minute, score, hits, mean distance.
 - speed: the walks played slower (the motion resampled to 30 / speed fps and tracked at 30 Hz):
   time to fall and the motion's seconds covered before it, PD + layer and the shipped policy.
+- legs: the legs' PD gains and torque limits scaled per segment (the statue probe: softer ankles
+  fall sooner); time to fall and the contact-force-weighted foot sliding
+  (benchmarks/tracker_vforce_cem.py's measure), PD + layer and the shipped policy.
 """
 from __future__ import annotations
 
@@ -496,9 +500,30 @@ def speed(walks: int, speeds: list[float]) -> None:
         print(f"{n}, speed {s}: time to fall {np.mean(v):.3f} s, motion covered {np.mean(v) * s:.3f} s")
 
 
+def legs(walks: int) -> None:
+    import tracker_vforce_cem as cem
+    from tracker.model import KP, TORQUE
+    cem._SETUP = make_setup(walk_source(None))
+    cem._WALKS = draw_walks(cem._SETUP.source, walks, 20, SEED)
+    ctrls = controllers(["layer", "policy"])
+    kp0, tq0 = dict(KP), dict(TORQUE)
+    try:
+        for scale in ({}, {"foot": 2}, {"foot": 2, "toe": 3}, {"toe": 3},
+                      {"foot": 2, "toe": 3, "shin": 1.5, "thigh": 1.5}, {"foot": 2, "toe": 3, "shin": 2, "thigh": 2}):
+            KP.update({k: kp0[k] * v for k, v in scale.items()})      # the tables PDController reads
+            TORQUE.update({k: tq0[k] * v for k, v in scale.items()})
+            row = [f"{n} {t:.3f} s, sliding {sl:.3f} m/s" for n, (t, sl) in ((n, cem.sliding(c)) for n, c in ctrls.items())]
+            print(f"{scale or 'as built'}: " + "; ".join(row), flush=True)
+            KP.update(kp0)
+            TORQUE.update(tq0)
+    finally:
+        KP.update(kp0)
+        TORQUE.update(tq0)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("probe", choices=("statue", "ground", "recover", "guard", "speed"))
+    ap.add_argument("probe", choices=("statue", "ground", "recover", "guard", "speed", "legs"))
     ap.add_argument("--frames", default="0,30,60,90,120")
     ap.add_argument("--walks", type=int, default=24)
     ap.add_argument("--controllers", default="pd,layer,policy")
@@ -517,6 +542,8 @@ def main(argv=None) -> int:
         if not a.graph:
             ap.error("guard needs --graph")
         guard(a.graph, a.bouts, a.plant)
+    elif a.probe == "legs":
+        legs(a.walks)
     elif a.probe == "speed":
         speed(a.walks, [float(x) for x in a.speeds.split(",")])
     elif a.probe == "recover":

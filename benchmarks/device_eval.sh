@@ -1,0 +1,39 @@
+#!/bin/bash
+# A large evaluation of the shipped planner fighters (STYLE+phys) against the physics RL baseline on
+# a machine with many cores (thirteenth session: a lent GPU machine's 16 CPU cores, 384 bouts in
+# 382 s; tracker/BOUTS.md, last section). Run from the repository root; the machine needs Python
+# with numpy, numba, scipy, torch, tqdm and matplotlib; mujoco can travel as wheels in .whl/
+# (INSTALL=1 installs them: `pip download --no-deps --only-binary=:all: --python-version 3.12
+# --platform manylinux_2_28_x86_64 -d .whl mujoco==4.0.0 mujoco-core==4.0.0 mujoco-studio==4.0.0
+# glfw pyopengl`), the mocap in .devdata/boxing (the graph is built there unless GRAPH is given).
+# Env: OUT (results), BOUTS (per style per chunk), WORKERS, BUDGET_S (no new chunk after this many
+# seconds), GRAPH, PY. Each chunk writes c<N>.json (the physics_rl eval format); the end prints the
+# pooled mean per style.
+set -u
+PY=${PY:-python3}
+OUT=${OUT:-/tmp/devout}; mkdir -p "$OUT"
+BOUTS=${BOUTS:-64}; WORKERS=${WORKERS:-16}; BUDGET_S=${BUDGET_S:-330}; GRAPH=${GRAPH:-}
+if [ -n "${INSTALL:-}" ]; then $PY -m pip install -q --no-deps .whl/*.whl 2>&1 | tail -2; fi
+export PYTHONPATH=$PWD
+nproc; $PY -c "import mujoco, numba, torch, numpy; print('mujoco', mujoco.__version__, 'numba', numba.__version__, 'torch', torch.__version__, 'numpy', numpy.__version__)"
+if [ -z "$GRAPH" ]; then
+  GRAPH=/tmp/g.igz; t0=$(date +%s)
+  $PY -m igraph_fight.cli build --mocap .devdata/boxing --out $GRAPH > "$OUT/build.log" 2>&1 || { tail -40 "$OUT/build.log"; exit 1; }
+  echo "graph built in $(( $(date +%s) - t0 )) s"; tail -3 "$OUT/build.log"
+fi
+T0=$(date +%s)
+for c in 0 1 2 3 4 5; do
+  [ $(( $(date +%s) - T0 )) -gt "$BUDGET_S" ] && break
+  t1=$(date +%s)
+  $PY -m tracker.physics_rl eval --graph $GRAPH --tracker tracker/checkpoints/boxing_cmu13.pt --styles infighter,outboxer \
+    --bouts $BOUTS --seed0 $((10000 + BOUTS * c)) --hit-model --workers $WORKERS --out "$OUT/c$c.json" >> "$OUT/eval.log" 2>&1 \
+    || { tail -30 "$OUT/eval.log"; exit 1; }
+  echo "chunk $c: $(( $(date +%s) - t1 )) s"
+done
+$PY - "$OUT" <<'PY'
+import json, sys, glob, numpy as np
+for st in ("infighter", "outboxer"):
+    rows = [r for f in sorted(glob.glob(sys.argv[1] + "/c*.json")) for r in json.load(open(f))["styles"][st]["bouts"]]
+    sc = np.array([r["score"] for r in rows])
+    if len(sc): print(st, len(sc), "bouts, mean", round(sc.mean(), 3), "+-", round(1.96 * sc.std(ddof=1) / np.sqrt(len(sc)), 3))
+PY

@@ -128,3 +128,16 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
         assert got == [sorted(w) for w in want]
         seen.update(len(g) for g in got)
     assert {1, 2} <= seen          # single and double support both occurred
+
+
+def test_layer_follows_gains_set_after_it_was_built(setup):
+    """The layer lives as long as the env; a controller that sets other PD gains at reset must get
+    the same physics as in a fresh env (its torques go through the actuators' current kp)."""
+    from tracker.vforce import BalanceGains
+    stiff = PDController(kp_scale=1.5, balance=BalanceGains().as_tuple())
+    walk = draw_walks(setup.source, 1, 4, 3)[0]
+    fresh = make_setup(setup.source)                              # its own env, no layer yet
+    want = _trajectory(fresh, stiff, walk)[0]
+    _trajectory(setup, PDController.balanced(), walk)          # builds setup.env's layer at the default gains
+    got = _trajectory(setup, stiff, walk)[0]
+    assert np.array_equal(got, want)

@@ -149,7 +149,6 @@ class VirtualForceBalance:
         for k, fi in enumerate(self.fighters):
             for i, (s, leg) in enumerate(fi.legs.items()):
                 self._owner[leg["geoms"]] = 2 * k + i
-                leg["kp"] = np.maximum(env.model.actuator_gainprm[leg["acts"], 0], 1e-9)
         self._sides = [tuple(fi.legs) for fi in self.fighters]
         self.geom_owner = {int(g): (k, s) for k, fi in enumerate(self.fighters)      # per contact, for probes
                            for s, leg in fi.legs.items() for g in leg["geoms"]}
@@ -228,4 +227,5 @@ class VirtualForceBalance:
                 tau = -(self._jp[:, cols].T @ Fs + self._jr[:, cols].T @ Ts)
                 np.clip(tau, -g.torque_clip, g.torque_clip, out=tau)
                 ids = leg["acts"]
-                d.ctrl[ids] = self._base[ids] + tau / leg["kp"]
+                # the gains as they are now: the layer outlives a controller's set_gains
+                d.ctrl[ids] = self._base[ids] + tau / np.maximum(m.actuator_gainprm[ids, 0], 1e-9)

@@ -310,14 +310,7 @@ def statue(frames: list[int]) -> None:
     print("frame | rigid planted | " + " | ".join(f"{n} raw / planted" for n in ctrls) + "  (s tracked of 10)")
     for k in frames:
         q0 = ref.qpos[k]
-        plan = {sd: dict(stance=np.ones(1, bool)) for sd in "lr"}
-        ik._pose(q0)
-        for sd in "lr":
-            h, b, _ = ik._points(sd)
-            plan[sd].update(heel=h[None], ball=b[None])
-        pts = np.array([ik.d.geom_xpos[g][:2] for sd in "lr" for g in ik.spheres[sd]["all"]])
-        plan["com"] = pts.mean(0)[None]
-        q = ik.solve(q0[None], plan)[0]
+        q = _plant(ik, q0)
         planted = as_reference(ref, setup.scene, fm, np.repeat(q[None], 300, 0))
         raw = rebuilt(ref, setup.scene, fm, np.repeat(q0[None], 300, 0), ground_every_frame=True)
         row = [f"{rigid_stands(setup.scene, fm, q):.2f}"]
@@ -456,13 +449,7 @@ def guard(graph: str, bouts: int, plant: bool) -> None:
         ik = Grounder(setup.scene, fm, GroundConfig(com=False), free_root_rotation=True)
         for a in np.nonzero(np.asarray(lib.kinds) == KINDS.index("guard"))[0]:
             c = setup.action_reference(int(a))
-            plan = {}
-            ik._pose(c["qpos"][0])
-            for sd in "lr":
-                h, b, _ = ik._points(sd)
-                plan[sd] = dict(stance=np.ones(1, bool), heel=h[None], ball=b[None])
-            plan["com"] = np.array([ik.d.geom_xpos[x][:2] for sd in "lr" for x in ik.spheres[sd]["all"]]).mean(0)[None]
-            q = np.repeat(ik.solve(c["qpos"][:1], plan), len(c["qpos"]), 0)
+            q = np.repeat(_plant(ik, c["qpos"][0])[None], len(c["qpos"]), 0)
             r = as_reference(Reference(30.0, c["qpos"], c["qvel"], c["ctrl"], c["ctrl_vel"], c["sites"],
                                        FootPenetration.from_depths(np.zeros(1))), setup.scene, fm, q)
             setup._refs[int(a)] = {"qpos": r.qpos, "qvel": r.qvel, "ctrl": r.ctrl, "ctrl_vel": r.ctrl_vel,

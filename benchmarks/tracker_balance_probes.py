@@ -179,8 +179,8 @@ class SplitBalance(VirtualForceBalance):
         load = dict.fromkeys(feet, 0.0)
         for i in range(d.ncon):
             c = d.contact[i]
-            o = (self.geom_owner.get(int(c.geom2)) if c.geom1 == self.floor else
-                 self.geom_owner.get(int(c.geom1)) if c.geom2 == self.floor else None)
+            o = (self.foot_of(c.geom2) if c.geom1 == self.floor else
+                 self.foot_of(c.geom1) if c.geom2 == self.floor else None)
             if o is not None and o[0] == k and o[1] in load:
                 mujoco.mj_contactForce(self.model, d, i, self._fr)
                 load[o[1]] += max(self._fr[0], 0.0)

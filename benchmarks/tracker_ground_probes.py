@@ -63,7 +63,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from tracker.controller import make_controller  # noqa: E402
 from tracker.evaluate import draw_walks, make_setup, track_reference, walk_reference  # noqa: E402
 from tracker.pd import PDController  # noqa: E402
-from tracker.reference import FootPenetration, Reference, ctrl_targets, qpos_velocity, site_positions  # noqa: E402
+from tracker.reference import FootPenetration, Reference  # noqa: E402
 from tracker.walks import walk_source  # noqa: E402
 from tracker_probes import rebuilt  # noqa: E402
 
@@ -264,13 +264,6 @@ def _into_hull(pts: np.ndarray, c: np.ndarray, margin: float) -> np.ndarray:
     return x
 
 
-def as_reference(ref: Reference, scene, fm, qpos: np.ndarray) -> Reference:
-    sites, low = site_positions(scene, fm, qpos)
-    qvel = qpos_velocity(qpos, fm, ref.fps)
-    ctrl, ctrl_vel = ctrl_targets(qpos, qvel, fm)
-    return Reference(ref.fps, qpos, qvel, ctrl, ctrl_vel, sites, FootPenetration.from_depths(-low), ref.source, {})
-
-
 def rigid_stands(scene, fm, q: np.ndarray, seconds: float = 10.0) -> float:
     """The pose as one rigid body (joints removed, rotations baked): seconds before the pelvis drops 30 cm."""
     m = scene.model
@@ -311,7 +304,7 @@ def statue(frames: list[int]) -> None:
     for k in frames:
         q0 = ref.qpos[k]
         q = _plant(ik, q0)
-        planted = as_reference(ref, setup.scene, fm, np.repeat(q[None], 300, 0))
+        planted = rebuilt(ref, setup.scene, fm, np.repeat(q[None], 300, 0), lift=False)
         raw = rebuilt(ref, setup.scene, fm, np.repeat(q0[None], 300, 0), ground_every_frame=True)
         row = [f"{rigid_stands(setup.scene, fm, q):.2f}"]
         for c in ctrls.values():
@@ -334,7 +327,7 @@ def ground(walks: int, names: list[str], cfg: GroundConfig) -> None:
         t0 = time.perf_counter()
         g = Grounder(setup.scene, fm, cfg)
         plan = g.plan(ref.qpos)
-        gref = as_reference(ref, setup.scene, fm, g.solve(ref.qpos, plan))
+        gref = rebuilt(ref, setup.scene, fm, g.solve(ref.qpos, plan), lift=False)
         wall.append(time.perf_counter() - t0)
         disp.append(float(np.linalg.norm(gref.sites[:, fm.tracked] - ref.sites[:, fm.tracked], axis=-1).mean()))
         shift.append(float(np.linalg.norm(plan["com_shift"], axis=1).mean()))
@@ -399,7 +392,7 @@ def recover_walk(setup, ctrl, ref: Reference, g: Grounder, threshold: float, hol
                 t_walk = env.t
                 frames = [q_sim] + [qp] * hold + [_blend(qp, ref.qpos[t_walk], (i + 1) / blend, m, fm)
                                                   for i in range(blend)]
-                rref = as_reference(ref, setup.scene, fm, np.array(frames))
+                rref = rebuilt(ref, setup.scene, fm, np.array(frames), lift=False)
                 env.refs, env.t, env.t_end, env.done = [rref], 0, rref.n_frames - 1, False   # probe: swap in place
                 left, n_rec = rref.n_frames - 1, n_rec + 1
         obs, _, done, info = env.step(ctrl.act(env, obs))
@@ -450,8 +443,8 @@ def guard(graph: str, bouts: int, plant: bool) -> None:
         for a in np.nonzero(np.asarray(lib.kinds) == KINDS.index("guard"))[0]:
             c = setup.action_reference(int(a))
             q = np.repeat(_plant(ik, c["qpos"][0])[None], len(c["qpos"]), 0)
-            r = as_reference(Reference(30.0, c["qpos"], c["qvel"], c["ctrl"], c["ctrl_vel"], c["sites"],
-                                       FootPenetration.from_depths(np.zeros(1))), setup.scene, fm, q)
+            r = rebuilt(Reference(30.0, c["qpos"], c["qvel"], c["ctrl"], c["ctrl_vel"], c["sites"],
+                                  FootPenetration.from_depths(np.zeros(1))), setup.scene, fm, q, lift=False)
             setup._refs[int(a)] = {"qpos": r.qpos, "qvel": r.qvel, "ctrl": r.ctrl, "ctrl_vel": r.ctrl_vel,
                                    "sites": r.sites, "balance": _ref_balance(setup.env, 0, r),
                                    "yaw": _yaws(r.qpos[:, 3:7], setup.env._cache[0].lateral)}

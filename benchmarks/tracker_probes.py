@@ -105,12 +105,15 @@ def flatten_feet(qpos: np.ndarray, m: mujoco.MjModel, f, feet: list[dict], full_
     return qpos
 
 
-def rebuilt(ref: Reference, scene, f, qpos: np.ndarray, ground_every_frame: bool = False) -> Reference:
+def rebuilt(ref: Reference, scene, f, qpos: np.ndarray, ground_every_frame: bool = False,
+            lift: bool = True) -> Reference:
     """A Reference from edited qpos: lifted like build_reference's "auto", or (ground_every_frame)
-    moved down per frame so the lowest foot point is on the floor."""
+    moved down per frame so the lowest foot point is on the floor, or (``lift=False``) left where
+    it is."""
     qpos = qpos.copy()
     sites, low = site_positions(scene, f, qpos)
-    shift = low if ground_every_frame else np.full(len(low), float(np.percentile(low, 10)))
+    shift = (low if ground_every_frame else np.full(len(low), float(np.percentile(low, 10)))) if lift \
+        else np.zeros(len(low))
     qpos[:, 2] -= shift
     sites = sites - np.c_[np.zeros((len(low), 2)), shift][:, None, :]
     qvel = qpos_velocity(qpos, f, ref.fps)

@@ -115,8 +115,8 @@ class SteppingBalance(VirtualForceBalance):
         pts = {"l": [], "r": []}
         for i in range(d.ncon):
             c = d.contact[i]
-            o = (self.geom_owner.get(int(c.geom2)) if c.geom1 == self.floor else
-                 self.geom_owner.get(int(c.geom1)) if c.geom2 == self.floor else None)
+            o = (self.foot_of(c.geom2) if c.geom1 == self.floor else
+                 self.foot_of(c.geom1) if c.geom2 == self.floor else None)
             if o is not None and o[0] == 0:
                 pts[o[1]].append(c.pos[:2].copy())
         return pts

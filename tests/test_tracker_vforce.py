@@ -112,6 +112,7 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
     env.reset(refs, 0)
     PDController.balanced().reset(env)
     layer, d = env.balance, env.data
+    owner = {int(g): (k, s) for k, fi in enumerate(layer.fighters) for s, leg in fi.legs.items() for g in leg["geoms"]}
     seen = set()
     for _ in range(60):
         env.step(env.reference_targets())
@@ -121,9 +122,10 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
         for i in range(d.ncon):
             g1, g2 = int(d.contact[i].geom[0]), int(d.contact[i].geom[1])
             other = g2 if g1 == scene.floor_geom else g1 if g2 == scene.floor_geom else None
-            if other in layer.geom_owner:
-                k, side = layer.geom_owner[other]
+            if other in owner:
+                k, side = owner[other]
                 want[k].add(side)
+                assert layer.foot_of(other) == (k, side)
         got = layer.stance_feet(d)
         assert got == [sorted(w) for w in want]
         seen.update(len(g) for g in got)

@@ -150,8 +150,6 @@ class VirtualForceBalance:
             for i, (s, leg) in enumerate(fi.legs.items()):
                 self._owner[leg["geoms"]] = 2 * k + i
         self._sides = [tuple(fi.legs) for fi in self.fighters]
-        self.geom_owner = {int(g): (k, s) for k, fi in enumerate(self.fighters)      # per contact, for probes
-                           for s, leg in fi.legs.items() for g in leg["geoms"]}
         self._frames = [_RefFrame(env.model) for _ in self.fighters]
         self._base = np.zeros(env.model.nu)
         self._jp = np.zeros((3, env.model.nv))
@@ -170,6 +168,11 @@ class VirtualForceBalance:
         cone, keeps the body up for less time at the same sliding, benchmarks/tracker_balance_probes.py)."""
         share = 1.0 / len(feet)
         return [(side, F * share, T * share) for side in feet]
+
+    def foot_of(self, geom: int) -> tuple[int, str] | None:
+        """(fighter, side) of a foot geom, None for any other geom."""
+        code = int(self._owner[geom])
+        return None if code < 0 else (code // 2, self._sides[code // 2][code % 2])
 
     def stance_feet(self, d: mujoco.MjData) -> list[list[str]]:
         """Per fighter, the sides ("l", "r", sorted) whose foot geoms touch the floor now."""

@@ -1,7 +1,8 @@
 """`igraph-fight tracker ...`: evaluate tracking controllers on action-graph walks, render them,
 export the generated MuJoCo model.
 
-    igraph-fight tracker eval [--controller pd|balance|learned] [--ckpt CKPT] --walks 100 --actions 20 --seed 0 [--json]
+    igraph-fight tracker eval [--controller pd|balance|learned|search] [--ckpt CKPT] --walks 100 --actions 20 --seed 0
+                              [--workers N] [--json]
     igraph-fight tracker render --out walk.png|walk.mp4 [--actions 6] [--seed 0] [--seconds 6]
     igraph-fight tracker model FILE.bvh --out fighter.xml [--fighters 2]
     igraph-fight tracker train --library LIB --minutes M --out CKPT [--resume CKPT] [--device auto]
@@ -29,7 +30,8 @@ def register(subparsers) -> None:
         q.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
         q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
-        q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, tracker/vforce.py) or learned")
+        q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, tracker/vforce.py), learned, or "
+                            "search (the learned policy steered by a run-time search: offline, ~0.15x real time)")
         q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
                                       "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
         q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")
@@ -41,6 +43,8 @@ def register(subparsers) -> None:
     e.add_argument("--walks", type=int, default=100, help="number of walks (default 100)")
     e.add_argument("--json", action="store_true", help="print the metrics as JSON")
     e.add_argument("--progress", action="store_true", help="show a progress bar")
+    e.add_argument("--workers", type=int, default=1, help="processes tracking walks in parallel (default 1; "
+                   "the metrics equal a serial run's, the real-time factor is per process)")
     e.set_defaults(func=cmd_eval)
 
     r = sub.add_parser("render", help="side-by-side reference vs simulation: PNG contact sheet or MP4")
@@ -108,7 +112,8 @@ def cmd_eval(args) -> int:
         print(f"igraph-fight tracker eval: {e}", file=sys.stderr)
         return 2
     setup = _setup(args)
-    metrics = evaluate_walks(setup, controller, args.walks, args.actions, args.seed, progress=args.progress)
+    metrics = evaluate_walks(setup, controller, args.walks, args.actions, args.seed, progress=args.progress,
+                             workers=args.workers)
     if args.json:
         print(json.dumps(metrics, indent=2))
     else:

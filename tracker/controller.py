@@ -56,10 +56,11 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
             pd = replace(pd, balance=BalanceGains().as_tuple(), name="balance")
         return pd
     if name not in CONTROLLERS:
-        if name == "learned":
-            try:  # the next issue's module registers "learned" when imported
+        mod = {"learned": "tracker.policy", "search": "tracker.search_controller"}.get(name)
+        if mod:
+            try:  # the module registers the controller when imported
                 import importlib
-                importlib.import_module("tracker.policy")
+                importlib.import_module(mod)
             except ModuleNotFoundError:
                 pass
         if name not in CONTROLLERS:

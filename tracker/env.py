@@ -172,7 +172,8 @@ class TrackingEnv:
     def set_balance(self, gains, fighter: int | None = None) -> None:
         """Turn the virtual-force balance layer (tracker.vforce) on with ``gains`` (a BalanceGains, five
         numbers or a dict), or off with None, for one fighter or all. Internal joint torques through the
-        leg actuators, no force on the root. Takes effect at once (controllers call it in reset)."""
+        leg actuators, no force on the root. Takes effect at once (controllers call it in reset); clears
+        the layer's steering (``balance.bias``)."""
         from .vforce import BalanceGains, VirtualForceBalance
         g = BalanceGains.parse(gains)
         if self.balance is None:
@@ -181,6 +182,7 @@ class TrackingEnv:
             self.balance = VirtualForceBalance(self)
         for k in (range(self.n_fighters) if fighter is None else [fighter]):
             self.balance.gains[k] = g
+            self.balance.bias[k] = 0.0          # steering (a balance head's) starts from none
 
     def set_root_assist(self, on: bool) -> None:
         """Hold each pelvis on its reference with a weld (needs ModelOptions(root_assist=True)).
@@ -236,6 +238,22 @@ class TrackingEnv:
         self.wall_time = 0.0
         self.done = False
         return self._obs_all()
+
+    def get_state(self) -> tuple[np.ndarray, int, bool]:
+        """The integration state (MuJoCo's mjSTATE_INTEGRATION) with the step counter and done flag,
+        for a search that tries several continuations from one state (``set_state``). Derived
+        quantities (contacts, velocities of bodies) are not part of it: use an observation taken
+        before, or mj_copyData of the whole MjData (tracker/search_controller.py)."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        s = np.empty(mujoco.mj_stateSize(self.model, spec))
+        mujoco.mj_getState(self.model, self.data, s, spec)
+        return s, self.t, self.done
+
+    def set_state(self, state: tuple[np.ndarray, int, bool]) -> None:
+        """Back to a state from ``get_state`` (body poses recomputed)."""
+        mujoco.mj_setState(self.model, self.data, state[0], mujoco.mjtState.mjSTATE_INTEGRATION)
+        self.t, self.done = state[1], state[2]
+        mujoco.mj_kinematics(self.model, self.data)
 
     def reference_targets(self, lead: int | None = None) -> np.ndarray:
         """(n_act,) reference PD position targets for the coming step (all fighters)."""

@@ -15,7 +15,7 @@ Metrics (``evaluate_walks`` returns them in a dict; ``--json`` prints it):
 - root_drift_cm: horizontal distance (cm) between the simulated and reference pelvis at the
   end of the run (the fall or the walk's end), mean over walks.
 - realtime_factor: simulated seconds per wall-clock second of the control loop (controller.act +
-  env.step, one fighter, one process).
+  env.step, one fighter, one process; with ``workers`` > 1, per process).
 - mpjpe_first_1s_cm: the same over the first second only (tracking before balance is lost).
 - reference_error_cm: largest distance between a reference joint site and the walk's forward
   kinematics (the conversion accuracy); reference foot penetration (p95 per walk averaged, max over
@@ -125,15 +125,48 @@ def draw_walks(source, n_walks: int, n_actions: int, seed: int) -> list[list[int
 
 
 def evaluate_walks(setup: EvalSetup, controller: Controller, n_walks: int = 100, n_actions: int = 20,
-                   seed: int = 0, progress: bool = False, lift: str = "auto") -> dict:
-    """Run the protocol and return the metrics dict (module doc)."""
+                   seed: int = 0, progress: bool = False, lift: str = "auto", workers: int = 1) -> dict:
+    """Run the protocol and return the metrics dict (module doc). ``workers`` > 1 tracks the walks in
+    that many processes (each its own scene; every walk is independent and deterministic, so the
+    metrics equal a serial run's except the wall-clock figures)."""
     walks = draw_walks(setup.source, n_walks, n_actions, seed)
-    it = walks
-    if progress:
-        from tqdm import tqdm
-        it = tqdm(walks, desc=f"walks ({controller.name})", unit="walk")
-    results = [run_walk(setup, controller, w, lift) for w in it]
+    if workers > 1 and len(walks) > 1:
+        results = _parallel_walks(setup, controller, walks, lift, workers, progress)
+    else:
+        it = walks
+        if progress:
+            from tqdm import tqdm
+            it = tqdm(walks, desc=f"walks ({controller.name})", unit="walk")
+        results = [run_walk(setup, controller, w, lift) for w in it]
     return summarise(results, controller, setup, n_actions, seed)
+
+
+def _walk_job(args) -> tuple[int, WalkResult]:
+    source, spec, options, config, controller, i, walk, lift = args
+    import torch
+    torch.set_num_threads(1)
+    global _JOB_SETUP
+    if _JOB_SETUP is None:
+        _JOB_SETUP = EvalSetup(source, spec, options, config)
+    return i, run_walk(_JOB_SETUP, controller, walk, lift)
+
+
+_JOB_SETUP: EvalSetup | None = None     # one scene per worker process (set by its first job)
+
+
+def _parallel_walks(setup: EvalSetup, controller: Controller, walks: list, lift: str, workers: int,
+                    progress: bool) -> list[WalkResult]:
+    import multiprocessing as mp
+    jobs = [(setup.source, setup.spec, setup.options, setup.config, controller, i, w, lift) for i, w in enumerate(walks)]
+    out: list = [None] * len(walks)
+    with mp.get_context("spawn").Pool(min(workers, len(walks))) as pool:
+        it = pool.imap_unordered(_walk_job, jobs)
+        if progress:
+            from tqdm import tqdm
+            it = tqdm(it, total=len(jobs), desc=f"walks ({controller.name}, {workers} processes)", unit="walk")
+        for i, r in it:
+            out[i] = r
+    return out
 
 
 def paired_comparison(setup: EvalSetup, controller: Controller, baseline: Controller, n_walks: int = 100,

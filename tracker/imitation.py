@@ -28,7 +28,6 @@ import os
 import time
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import torch
 
@@ -47,7 +46,6 @@ def search_labels(worker, actor_state: dict, norm_state: dict, n_segments: int) 
     from .policy import Actor
     cfg = worker.cfg
     env = worker.envs[0]
-    m, d = env.model, env.data
     D, A = worker.obs.shape[1], worker.act_dim
     actor = Actor(D, A, cfg.hidden, cfg.init_log_std)
     actor.load_state_dict(actor_state)
@@ -57,18 +55,7 @@ def search_labels(worker, actor_state: dict, norm_state: dict, n_segments: int) 
     sig = (np.full(A, cfg.search_sigma_legs) if A != env.n_act
            else np.where(leg_mask(worker.scene), cfg.search_sigma_legs, cfg.search_sigma))
     clip = cfg.action_clip
-    spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    size = mujoco.mj_stateSize(m, spec)
-
-    def get_state():
-        s = np.empty(size)
-        mujoco.mj_getState(m, d, s, spec)
-        return s, env.t, env.done
-
-    def set_state(st):
-        mujoco.mj_setState(m, d, st[0], spec)
-        env.t, env.done = st[1], st[2]
-        mujoco.mj_kinematics(m, d)
+    get_state, set_state = env.get_state, env.set_state
 
     def policy(o):
         return net(norm(o[None]))[0]

@@ -247,6 +247,14 @@ class LearnedController:
         self.balance = bool(cfg.get("balance_obs", False))
         self.action_space = cfg.get("action_space", "joints")
         self.obs_future = tuple(cfg.get("obs_future", (1, 2, 4)))   # reference horizons it was trained with
+        # optional balance head that steers the layer (tracker.layer_head)
+        self.head = None
+        if ckpt.get("layer_head") is not None:
+            from .layer_head import HeadConfig, HeadRunner
+            if not cfg.get("vf_gains"):
+                raise ValueError(f"{path or 'checkpoint'}: a layer_head needs the balance layer (config vf_gains)")
+            self.head = HeadRunner.from_state(ckpt["layer_head"]["state"], self.norm,
+                                              HeadConfig.from_dict(ckpt["layer_head"]["config"]))
         self.pd = PDSettings(**{k: cfg[k] for k in ("kp_scale", "kd_ratio", "torque_scale", "velocity_targets",
                                                     "arm_velocity_targets") if k in cfg},
                              vf_gains=tuple(cfg.get("vf_gains", ())))
@@ -277,6 +285,8 @@ class LearnedController:
         if self.balance:
             obs = policy_observation(env, obs)
         a = self.residual(obs)
+        if self.head is not None:
+            env.balance.bias[:] = self.head.bias(obs)
         if self.action_space == "balance":
             from .balance import structured_offsets
             tg = env.reference_targets()
@@ -293,6 +303,7 @@ class LearnedController:
     def describe(self) -> str:
         b = self.budget
         vf = " over the virtual-force balance layer" if self.pd.vf_gains else ""
+        vf += " steered by a learned balance head" if self.head is not None else ""
         vf += ", arm velocity targets" if self.pd.arm_velocity_targets else ""
         return (f"learned policy {self.ckpt_path or '(in memory)'}{vf}: trained {b.get('samples', 0) / 1e6:.1f}M samples, "
                 f"{b.get('cpu_hours', 0.0):.2f} CPU-hours on {self.library.get('describe', '?')}")

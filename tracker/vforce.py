@@ -28,6 +28,12 @@ the loaded feet over the floor (contact-force-weighted foot sliding 0.71 m/s aga
 m/s): a body under them skates, and physics bouts drift apart. The defaults come from the second,
 which charges sliding above 0.25 m/s (policy E's own level): 1.73 s against PD's 1.36 s on the
 protocol's walks at 0.25 m/s, and under policy E 2.17 s at 0.32 m/s (E alone 1.66 s, 0.27 m/s).
+Steering (``layer.bias[k]``, six numbers per fighter, default zeros = the layer as described): shifts
+of the targets in the fighter's facing frame (x along the hip line, right to left, y = z cross x,
+the frame of TrackingEnv.observe), held for a control step: the centre of mass's offset from the stance feet
+(dx, dy, m), its velocity (dvx, dvy, m/s) and the pelvis orientation (rx, ry, rad: a rotation
+vector about the facing axes applied to the reference's). A learned balance head
+(tracker/layer_head.py) sets them each control step.
 An approximation: the quantities are one physics substep old (MuJoCo's mj_step leaves them so),
 4 ms at 240 Hz.
 """
@@ -157,6 +163,10 @@ class VirtualForceBalance:
         self._qerr = np.zeros(4)
         self._qc = np.zeros(4)
         self._rv = np.zeros(3)
+        self.bias = np.zeros((len(self.fighters), 6))        # steering, module doc
+        self._bw = np.zeros((len(self.fighters), 4))         # this step's bias: offset, velocity (world)
+        self._bq: list[np.ndarray | None] = [None] * len(self.fighters)   # biased pelvis target
+        self._lateral = [c.lateral for c in env._cache]
 
     @property
     def active(self) -> bool:
@@ -185,6 +195,27 @@ class VirtualForceBalance:
                     out[code // 2].append(self._sides[code // 2][code % 2])
         return out
 
+    def _steer(self, d: mujoco.MjData, k: int) -> None:
+        """This control step's world-frame bias of fighter k (``bias`` turned by the pelvis's heading)."""
+        b = self.bias[k]
+        if not b.any():
+            self._bq[k] = None
+            return
+        w = d.xmat[self.fighters[k].pelvis].reshape(3, 3) @ self._lateral[k]
+        yaw = float(np.arctan2(w[1], w[0]))
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        turn = np.array([[cy, -sy], [sy, cy]])          # facing -> world (the transpose of observe's)
+        self._bw[k, :2] = turn @ b[:2]
+        self._bw[k, 2:] = turn @ b[2:4]
+        rv = np.zeros(3)
+        rv[:2] = turn @ b[4:6]
+        ang = float(np.linalg.norm(rv))
+        dq, q = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(4)
+        if ang > 0:
+            mujoco.mju_axisAngle2Quat(dq, rv / ang, ang)
+        mujoco.mju_mulQuat(q, dq, self._frames[k].quat)
+        self._bq[k] = q
+
     def substep(self, env, d: mujoco.MjData, s: int) -> None:
         """After physics substep ``s`` of a control step: set the leg targets for the next substep."""
         m = self.model
@@ -194,6 +225,7 @@ class VirtualForceBalance:
             for k, g in enumerate(self.gains):
                 if g is not None:
                     self._frames[k].update(env.scene.fighters[k], self.fighters[k], env.refs[k], t)
+                    self._steer(d, k)
         stance = self.stance_feet(d)
         need = [k for k, g in enumerate(self.gains) if g is not None and stance[k]]
         for k, fi in enumerate(self.fighters):
@@ -213,11 +245,17 @@ class VirtualForceBalance:
             fs = cen[0] if len(feet) == 1 else (cen[0] + cen[1]) / 2
             fr = tr.feet[feet[0]] if len(feet) == 1 else (tr.feet[feet[0]] + tr.feet[feet[1]]) / 2
             F = np.zeros(3)
-            F[:2] = g.com_kp * ((tr.com[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] - v[:2])
+            if self._bq[k] is None:
+                F[:2] = g.com_kp * ((tr.com[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] - v[:2])
+                target = tr.quat
+            else:
+                bw = self._bw[k]
+                F[:2] = g.com_kp * ((tr.com[:2] + bw[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] + bw[2:] - v[:2])
+                target = self._bq[k]
             if g.drift_kp:
                 F[:2] += g.drift_kp * (tr.com[:2] - c[:2])
             mujoco.mju_negQuat(self._qc, d.xquat[fi.pelvis])
-            mujoco.mju_mulQuat(self._qerr, tr.quat, self._qc)
+            mujoco.mju_mulQuat(self._qerr, target, self._qc)
             if self._qerr[0] < 0.0:
                 self._qerr *= -1.0
             mujoco.mju_quat2Vel(self._rv, self._qerr, 1.0)

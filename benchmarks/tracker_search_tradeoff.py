@@ -1,0 +1,40 @@
+"""Strength against cost of the run-time search controller (tracker/search_controller.py).
+
+The protocol's first N walks (seed 0, 20 actions) under a search with the given candidates and
+lookahead; prints one JSON line: completion, mean time to fall, MPJPE and the real-time factor
+(one process). Fourteenth session, tracker/TRAINING.md:
+
+    python benchmarks/tracker_search_tradeoff.py --candidates 8 --lookahead 24 --walks 10
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tracker.evaluate import evaluate_walks, make_setup  # noqa: E402
+from tracker.search_controller import SearchSettings, load_search  # noqa: E402
+from tracker.walks import walk_source  # noqa: E402
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--candidates", type=int, default=16)
+    ap.add_argument("--lookahead", type=int, default=45, help="control steps (30 per second)")
+    ap.add_argument("--space", default="joints", choices=("joints", "layer"))
+    ap.add_argument("--walks", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    setup = make_setup(walk_source(None))
+    ctrl = load_search(None, SearchSettings(candidates=a.candidates, lookahead=a.lookahead, space=a.space))
+    m = evaluate_walks(setup, ctrl, a.walks, 20, a.seed)
+    keys = ("n_walks", "completion_rate", "mean_time_to_fall_s", "mean_walk_duration_s", "mpjpe_cm", "realtime_factor")
+    print(json.dumps(dict(candidates=a.candidates, lookahead=a.lookahead, space=a.space, **{k: m[k] for k in keys})))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

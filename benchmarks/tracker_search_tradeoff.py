@@ -5,6 +5,8 @@ lookahead; prints one JSON line: completion, mean time to fall, MPJPE and the re
 (one process). Fourteenth session, tracker/TRAINING.md:
 
     python benchmarks/tracker_search_tradeoff.py --candidates 8 --lookahead 24 --walks 10
+    python benchmarks/tracker_search_tradeoff.py --first 40 --walks 30 --workers 2 --json-out F.json
+        (the protocol's walks 40-69 under the default search, per-walk rows kept)
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracker.evaluate import evaluate_walks, make_setup  # noqa: E402
+from tracker.evaluate import _parallel_walks, draw_walks, make_setup, run_walk, summarise  # noqa: E402
 from tracker.search_controller import SearchSettings, load_search  # noqa: E402
 from tracker.walks import walk_source  # noqa: E402
 
@@ -27,10 +29,20 @@ def main(argv=None) -> int:
     ap.add_argument("--space", default="joints", choices=("joints", "layer"))
     ap.add_argument("--walks", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--first", type=int, default=0, help="skip the seed's first walks")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--json-out", default="", help="also write the metrics and per-walk rows here")
     a = ap.parse_args(argv)
     setup = make_setup(walk_source(None))
     ctrl = load_search(None, SearchSettings(candidates=a.candidates, lookahead=a.lookahead, space=a.space))
-    m = evaluate_walks(setup, ctrl, a.walks, 20, a.seed)
+    walks = draw_walks(setup.source, a.first + a.walks, 20, a.seed)[a.first:]
+    rows = (_parallel_walks(setup, ctrl, walks, "auto", a.workers, False) if a.workers > 1
+            else [run_walk(setup, ctrl, w) for w in walks])
+    m = summarise(rows, ctrl, setup, 20, a.seed)
+    if a.json_out:
+        Path(a.json_out).write_text(json.dumps(dict(m, first=a.first, rows=[
+            dict(walk=r.walk, time_s=r.time_s, duration_s=r.duration_s, fell=bool(r.fell), mpjpe_m=r.mpjpe_m)
+            for r in rows]), indent=1))
     keys = ("n_walks", "completion_rate", "mean_time_to_fall_s", "mean_walk_duration_s", "mpjpe_cm", "realtime_factor")
     print(json.dumps(dict(candidates=a.candidates, lookahead=a.lookahead, space=a.space, **{k: m[k] for k in keys})))
     return 0

@@ -17,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracker.evaluate import _parallel_walks, draw_walks, make_setup, run_walk, summarise  # noqa: E402
+from tracker.evaluate import draw_walks, make_setup, run_walks, summarise  # noqa: E402
 from tracker.search_controller import SearchSettings, load_search  # noqa: E402
 from tracker.walks import walk_source  # noqa: E402
 
@@ -36,8 +36,7 @@ def main(argv=None) -> int:
     setup = make_setup(walk_source(None))
     ctrl = load_search(None, SearchSettings(candidates=a.candidates, lookahead=a.lookahead, space=a.space))
     walks = draw_walks(setup.source, a.first + a.walks, 20, a.seed)[a.first:]
-    rows = (_parallel_walks(setup, ctrl, walks, "auto", a.workers, False) if a.workers > 1
-            else [run_walk(setup, ctrl, w) for w in walks])
+    rows = run_walks(setup, ctrl, walks, workers=a.workers)
     m = summarise(rows, ctrl, setup, 20, a.seed)
     if a.json_out:
         Path(a.json_out).write_text(json.dumps(dict(m, first=a.first, rows=[

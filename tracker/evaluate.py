@@ -130,36 +130,25 @@ def evaluate_walks(setup: EvalSetup, controller: Controller, n_walks: int = 100,
     that many processes (each its own scene; every walk is independent and deterministic, so the
     metrics equal a serial run's except the wall-clock figures)."""
     walks = draw_walks(setup.source, n_walks, n_actions, seed)
-    if workers > 1 and len(walks) > 1:
-        results = _parallel_walks(setup, controller, walks, lift, workers, progress)
-    else:
+    results = run_walks(setup, controller, walks, lift, workers, progress)
+    return summarise(results, controller, setup, n_actions, seed)
+
+
+def run_walks(setup: EvalSetup, controller: Controller, walks: list, lift: str = "auto", workers: int = 1,
+              progress: bool = False) -> list[WalkResult]:
+    """``run_walk`` for each walk, in order; ``workers`` > 1 spreads them over that many processes
+    (each builds its scene once; the results equal a serial run's except the wall-clock figures)."""
+    if workers <= 1 or len(walks) <= 1:
         it = walks
         if progress:
             from tqdm import tqdm
             it = tqdm(walks, desc=f"walks ({controller.name})", unit="walk")
-        results = [run_walk(setup, controller, w, lift) for w in it]
-    return summarise(results, controller, setup, n_actions, seed)
-
-
-def _walk_job(args) -> tuple[int, WalkResult]:
-    source, spec, options, config, controller, i, walk, lift = args
-    import torch
-    torch.set_num_threads(1)
-    global _JOB_SETUP
-    if _JOB_SETUP is None:
-        _JOB_SETUP = EvalSetup(source, spec, options, config)
-    return i, run_walk(_JOB_SETUP, controller, walk, lift)
-
-
-_JOB_SETUP: EvalSetup | None = None     # one scene per worker process (set by its first job)
-
-
-def _parallel_walks(setup: EvalSetup, controller: Controller, walks: list, lift: str, workers: int,
-                    progress: bool) -> list[WalkResult]:
+        return [run_walk(setup, controller, w, lift) for w in it]
     import multiprocessing as mp
-    jobs = [(setup.source, setup.spec, setup.options, setup.config, controller, i, w, lift) for i, w in enumerate(walks)]
+    jobs = [(controller, i, w, lift) for i, w in enumerate(walks)]
     out: list = [None] * len(walks)
-    with mp.get_context("spawn").Pool(min(workers, len(walks))) as pool:
+    init = (setup.source, setup.spec, setup.options, setup.config)
+    with mp.get_context("spawn").Pool(min(workers, len(walks)), initializer=_init_worker, initargs=init) as pool:
         it = pool.imap_unordered(_walk_job, jobs)
         if progress:
             from tqdm import tqdm
@@ -167,6 +156,21 @@ def _parallel_walks(setup: EvalSetup, controller: Controller, walks: list, lift:
         for i, r in it:
             out[i] = r
     return out
+
+
+_WORKER_SETUP: EvalSetup | None = None     # the scene of a run_walks worker process (_init_worker)
+
+
+def _init_worker(source, spec, options, config) -> None:
+    import torch
+    torch.set_num_threads(1)
+    global _WORKER_SETUP
+    _WORKER_SETUP = EvalSetup(source, spec, options, config)
+
+
+def _walk_job(args) -> tuple[int, WalkResult]:
+    controller, i, walk, lift = args
+    return i, run_walk(_WORKER_SETUP, controller, walk, lift)
 
 
 def paired_comparison(setup: EvalSetup, controller: Controller, baseline: Controller, n_walks: int = 100,

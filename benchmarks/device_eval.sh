@@ -7,14 +7,20 @@
 # --platform manylinux_2_28_x86_64 -d .whl mujoco==4.0.0 mujoco-core==4.0.0 mujoco-studio==4.0.0
 # glfw pyopengl`), the mocap in .devdata/boxing (the graph is built there unless GRAPH is given).
 # Env: OUT (results), BOUTS (per style per chunk), WORKERS, BUDGET_S (no new chunk after this many
-# seconds), GRAPH, PY. Each chunk writes c<N>.json (the physics_rl eval format); the end prints the
+# seconds), GRAPH, PY, TRACKER (default the shipped policy; e.g. search:16,45:early, fifteenth
+# session), BOUT_SECONDS (bout length, 60), SEED (first chunk's first seed, 10000), CHUNKS (at most, 6). Each chunk writes c<N>_<style>.json (the physics_rl eval format); the end prints the
 # pooled mean per style.
 set -u
 PY=${PY:-python3}
 OUT=${OUT:-/tmp/devout}; mkdir -p "$OUT"
 BOUTS=${BOUTS:-64}; WORKERS=${WORKERS:-16}; BUDGET_S=${BUDGET_S:-330}; GRAPH=${GRAPH:-}
-if [ -n "${INSTALL:-}" ]; then $PY -m pip install -q --no-deps .whl/*.whl 2>&1 | tail -2; fi
+TRACKER=${TRACKER:-tracker/checkpoints/boxing_cmu13.pt}; SECONDS_BOUT=${BOUT_SECONDS:-60}; SEED=${SEED:-10000}
+CHUNKS=${CHUNKS:-6}
 export PYTHONPATH=$PWD
+if [ -n "${INSTALL:-}" ]; then
+  $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl 2>&1 | tail -2
+  export PYTHONPATH=/tmp/site:$PWD
+fi
 nproc; $PY -c "import mujoco, numba, torch, numpy; print('mujoco', mujoco.__version__, 'numba', numba.__version__, 'torch', torch.__version__, 'numpy', numpy.__version__)"
 if [ -z "$GRAPH" ]; then
   GRAPH=/tmp/g.igz; t0=$(date +%s)
@@ -22,18 +28,23 @@ if [ -z "$GRAPH" ]; then
   echo "graph built in $(( $(date +%s) - t0 )) s"; tail -3 "$OUT/build.log"
 fi
 T0=$(date +%s)
-for c in 0 1 2 3 4 5; do
+for c in $(seq 0 $((CHUNKS - 1))); do
   [ $(( $(date +%s) - T0 )) -gt "$BUDGET_S" ] && break
   t1=$(date +%s)
-  $PY -m tracker.physics_rl eval --graph $GRAPH --tracker tracker/checkpoints/boxing_cmu13.pt --styles infighter,outboxer \
-    --bouts $BOUTS --seed0 $((10000 + BOUTS * c)) --hit-model --workers $WORKERS --out "$OUT/c$c.json" >> "$OUT/eval.log" 2>&1 \
-    || { tail -30 "$OUT/eval.log"; exit 1; }
+  # the two styles side by side, half the workers each (a style's bouts are one pool)
+  for st in infighter outboxer; do
+    $PY -m tracker.physics_rl eval --graph $GRAPH --tracker "$TRACKER" --styles $st --seconds $SECONDS_BOUT \
+      --bouts $BOUTS --seed0 $((SEED + BOUTS * c)) --hit-model --workers $((WORKERS / 2)) --out "$OUT/c${c}_$st.json" \
+      >> "$OUT/eval_$st.log" 2>&1 &
+  done
+  wait || true
+  for st in infighter outboxer; do [ -s "$OUT/c${c}_$st.json" ] || { tail -30 "$OUT/eval_$st.log"; exit 1; }; done
   echo "chunk $c: $(( $(date +%s) - t1 )) s"
 done
 $PY - "$OUT" <<'PY'
 import json, sys, glob, numpy as np
 for st in ("infighter", "outboxer"):
-    rows = [r for f in sorted(glob.glob(sys.argv[1] + "/c*.json")) for r in json.load(open(f))["styles"][st]["bouts"]]
+    rows = [r for f in sorted(glob.glob(sys.argv[1] + "/c*.json")) for r in json.load(open(f))["styles"].get(st, {}).get("bouts", [])]
     sc = np.array([r["score"] for r in rows])
     if len(sc): print(st, len(sc), "bouts, mean", round(sc.mean(), 3), "+-", round(1.96 * sc.std(ddof=1) / np.sqrt(len(sc)), 3))
 PY

@@ -180,6 +180,8 @@ class PhysicsBout:
             _, cb, note = self._pending.pop(0)
             cb()
             self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
+        if hasattr(self.tracker, "idle"):          # a search tracker skips fallen fighters
+            self.tracker.idle = [f.down for f in self.F]
         act = self.tracker.act(env, self._obs)
         for f in self.F:
             if f.down:

@@ -85,10 +85,16 @@ class MenuAgent:
 
 
 def load_tracker(spec: str | None = None):
-    """The tracking controller: ``"pd"``, a checkpoint path, or None for the shipped learned policy
-    (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing).
+    """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
+    (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
+    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:CKPT]"``: that
+    policy steered by a run-time search (tracker.bout_search; default tracker.bout_search.BOUT_SEARCH;
+    C candidates, L look-ahead control steps, early acceptance on or off, and the other knobs of
+    tracker.search_controller.SearchSettings; offline quality, slower than real time).
     The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
     spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
+    if spec is not None and (spec == "search" or spec.startswith("search:")):
+        return load_bout_search(spec)
     if spec == "pd":
         from .pd import PDController
         return PDController()
@@ -99,6 +105,38 @@ def load_tracker(spec: str | None = None):
               "(give a checkpoint with IGRAPH_FIGHT_TRACKER=PATH)", file=sys.stderr)
         return PDController()
     return load_policy(spec)
+
+
+_FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept"}   # spec tokens -> SearchSettings
+
+
+def load_bout_search(spec: str):
+    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:CKPT]`` ->
+    tracker.bout_search.BoutSearchTracker (see load_tracker)."""
+    from dataclasses import replace
+
+    from .bout_search import BOUT_SEARCH, BoutSearchTracker
+    from .policy import load_policy
+    settings, ckpt = BOUT_SEARCH, None
+    for tok in spec.split(":")[1:]:
+        c, comma, la = tok.partition(",")
+        if comma and c.isdigit() and la.isdigit():
+            if int(c) < 1 or int(la) < 0:
+                raise ValueError(f"tracker {spec!r}: candidates >= 1 and look-ahead >= 0 control steps")
+            settings = replace(settings, candidates=int(c), lookahead=int(la))
+        elif tok in ("early", "full"):
+            settings = replace(settings, early_accept=tok == "early")
+        elif tok in _FLAGS:
+            settings = replace(settings, **{_FLAGS[tok]: True})
+        elif tok.startswith(("heading=", "yawtol=")):
+            name, _, val = tok.partition("=")
+            try:
+                settings = replace(settings, **{"heading_weight" if name == "heading" else "yaw_tol": float(val)})
+            except ValueError:
+                raise ValueError(f"tracker {spec!r}: {name}= needs a number") from None
+        elif tok:
+            ckpt = tok
+    return BoutSearchTracker(load_policy(ckpt), settings)
 
 
 def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", future: str = "calibrated"):

@@ -66,6 +66,9 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
     return 0
 
 
+TRACKER_HELP = ("tracking policy checkpoint, 'pd', or 'search[:C,L][:early|full][:heading=W][:CKPT]' (the policy "
+                "steered by a run-time search: far fewer falls, 0.1-0.3x real time; tracker/bout_search.py); "
+                "default: the shipped policy")
 FACING_HELP = ("which way a fallen fighter faces when it gets up: towards the opponent (default) or its "
                "fighting direction at the fall (the rule before)")
 RESET_HELP = ("where a fallen fighter gets up: on its reference pelvis (default; the topple undone) or where "
@@ -87,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--seconds", type=float, default=60.0)
     f.add_argument("--seed", type=int, default=1)
     f.add_argument("--out", default="out/fight")
-    f.add_argument("--tracker", default=None, help="tracking policy checkpoint, or 'pd' (default: the shipped one)")
+    f.add_argument("--tracker", default=None, help=TRACKER_HELP)
     f.add_argument("--no-video", dest="video", action="store_false", default=True)
     f.add_argument("--video-fps", type=float, default=15.0)
     f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
@@ -103,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--bouts", type=int, default=10)
     r.add_argument("--seconds", type=float, default=60.0)
     r.add_argument("--seed0", type=int, default=0)
-    r.add_argument("--tracker", default=None)
+    r.add_argument("--tracker", default=None, help=TRACKER_HELP)
     r.add_argument("--root-assist", action="store_true")
     r.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     r.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)

@@ -171,6 +171,7 @@ class FighterScene:
     fighters: list[BodyMap]
     floor_geom: int
     options: ModelOptions
+    specs: tuple = field(default=(), repr=False, compare=False)   # each fighter's FighterSpec (tracker/bout_search.py)
     _geom_table: tuple | None = field(default=None, repr=False, compare=False)  # contacts.geom_table cache
 
     def new_data(self) -> mujoco.MjData:
@@ -673,7 +674,7 @@ def build_fighter_scene(spec: FighterSpec | list[FighterSpec], n_fighters: int =
     model = mujoco.MjModel.from_xml_string(xml)
     fighters = [_body_map(model, sp, k, infos[k], options) for k, sp in enumerate(specs)]
     floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
-    return FighterScene(xml, model, fighters, floor, options)
+    return FighterScene(xml, model, fighters, floor, options, tuple(specs))
 
 
 def _ring_xml(size: float) -> str:

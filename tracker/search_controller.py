@@ -43,6 +43,18 @@ class SearchSettings:
     drift_m: float = 1.0
     reward_weights: tuple[float, ...] = (0.5, 0.05, 0.15, 0.15, 0.15)
     seed: int = 0
+    # Cheaper variants (off by default: the figures of tracker/TRAINING.md are without them):
+    early_accept: bool = False    # play no offset, trying nothing else, when the plain policy's rollout
+    #                               stays up and within drift_m over the whole look-ahead
+    reuse: bool = False           # the previous segment's offset is always the second candidate
+    first_kept: bool = False      # stop at the first candidate whose rollout stays up (and on the
+    #                               reference, within yaw_tol) over the look-ahead, instead of trying all
+    incremental: bool = False     # with early_accept: an accepted plain rollout is kept and, at the next
+    #                               search, extended by one segment instead of simulated again (exact
+    #                               where the env is the one played: the plain policy is deterministic)
+    # Heading (physics bouts, where a fighter's facing steers the planner; fifteenth session):
+    heading_weight: float = 0.0   # extra reward heading_weight * exp(-10 (1 - cos(yaw error))) per step
+    yaw_tol: float = float("inf")  # early_accept also needs the pelvis yaw within this (rad) of the reference's
 
 
 class SearchController:
@@ -71,6 +83,8 @@ class SearchController:
         self.k = 0
         self.delta = np.zeros(len(self.sig))
         self._snap = mujoco.MjData(env.model)
+        self._tail = None                       # (t, sim_time, done, obs) at the end of the kept plain rollout
+        self._tail_snap = mujoco.MjData(env.model)
 
     def describe(self) -> str:
         s = self.s
@@ -88,7 +102,7 @@ class SearchController:
 
     def act(self, env, obs: np.ndarray) -> np.ndarray:
         if self.k % self.s.segment == 0:
-            self.delta = self._search(env, obs)
+            self._search(env, obs)
         self.k += 1
         return self._apply(env, obs, self.delta)
 
@@ -103,34 +117,90 @@ class SearchController:
         mujoco.mj_copyData(env.data, env.model, self._snap)
         env.t, env.sim_time, env.done = st
 
-    def _score(self, env, obs: np.ndarray, delta: np.ndarray) -> float:
+    def _lost(self, env, info) -> bool:
+        """A fall, or the pelvis more than drift_m from the reference's."""
+        dxy = env.data.qpos[:2] - env.refs[0].qpos[env.t, :2]
+        return info.fall[0] is not None or float(dxy @ dxy) > self.s.drift_m ** 2
+
+    def _cos_yaw_err(self, env) -> float:
+        from .env import _heading
+        c = env._cache[0]
+        return float(np.cos(_heading(env.data.xmat[c.pelvis].reshape(3, 3), c.lateral) - self.rr.heading[env.t]))
+
+    def _score(self, env, obs: np.ndarray, delta: np.ndarray, keep_tail: bool = False) -> tuple[float, bool]:
+        """Discounted tracking return of one candidate, and whether its rollout stayed up and on the
+        reference to the end of the look-ahead (or of the reference). ``keep_tail``: remember the
+        rollout's end state when it did (SearchSettings.incremental)."""
         from .train import tracking_reward
         s = self.s
         zero = np.zeros_like(delta)
-        ret, disc, o = 0.0, 1.0, obs
-        ref = env.refs[0]
+        ret, disc, o, kept = 0.0, 1.0, obs, True
         for j in range(s.segment + s.lookahead):
             o, _, done, info = env.step(self._apply(env, o, delta if j < s.segment else zero))
-            dxy = env.data.qpos[:2] - ref.qpos[env.t, :2]
-            if info.fall[0] is not None or float(dxy @ dxy) > s.drift_m ** 2:
-                break
-            ret += disc * tracking_reward(env, self.rr, s.reward_weights)
+            if self._lost(env, info):
+                return ret, False
+            r = tracking_reward(env, self.rr, s.reward_weights)
+            if s.heading_weight or s.yaw_tol < np.inf:
+                cos_err = self._cos_yaw_err(env)
+                r += s.heading_weight * float(np.exp(-10.0 * (1.0 - cos_err)))
+                kept = kept and cos_err >= np.cos(s.yaw_tol)
+            ret += disc * r
             disc *= s.gamma
             if done:
                 break
-        return ret
+        if kept and keep_tail:
+            mujoco.mj_copyData(self._tail_snap, env.model, env.data)
+            self._tail = (env.t, env.sim_time, env.done, o.copy())
+        return ret, kept
+
+    def _extend(self, env) -> bool:
+        """Extend the kept plain rollout by one segment (the env is left at its end); False, and the
+        rollout forgotten, when the extension falls, drifts or turns off the yaw tolerance."""
+        t, sim_time, done, o = self._tail
+        mujoco.mj_copyData(env.data, env.model, self._tail_snap)
+        env.t, env.sim_time, env.done = t, sim_time, done
+        zero = np.zeros(len(self.sig))
+        for _ in range(self.s.segment):
+            if env.done:
+                break
+            o, _, _, info = env.step(self._apply(env, o, zero))
+            if self._lost(env, info) or (self.s.yaw_tol < np.inf and self._cos_yaw_err(env) < np.cos(self.s.yaw_tol)):
+                self._tail = None
+                return False
+        mujoco.mj_copyData(self._tail_snap, env.model, env.data)
+        self._tail = (env.t, env.sim_time, env.done, o.copy())
+        return True
 
     def _search(self, env, obs: np.ndarray) -> np.ndarray:
+        """The best offset from the env's current state (left as it was); also kept as ``delta``."""
         st = self._save(env)
+        incremental = self.s.early_accept and self.s.incremental
+        if incremental and self._tail is not None and not np.any(self.delta):
+            ok = self._extend(env)
+            self._restore(env, st)
+            if ok:
+                return self.delta
+        self._tail = None
         best, best_ret = np.zeros(len(self.sig)), -np.inf
+        prev = self.delta
         for k in range(self.s.candidates):
             if k:
                 self._restore(env, st)
-            delta = np.zeros(len(self.sig)) if k == 0 else self.rng.normal(0.0, 1.0, len(self.sig)) * self.sig
-            ret = self._score(env, obs, delta)
+            if k == 0:
+                delta = np.zeros(len(self.sig))
+            elif k == 1 and self.s.reuse and np.any(prev):
+                delta = prev
+            else:
+                delta = self.rng.normal(0.0, 1.0, len(self.sig)) * self.sig
+            ret, kept = self._score(env, obs, delta, keep_tail=incremental and k == 0)
             if ret > best_ret:
                 best, best_ret = delta, ret
+            if kept and ((k == 0 and self.s.early_accept) or (k > 0 and self.s.first_kept)):
+                if k > 0:
+                    best = delta              # the first that stays up, not the best return so far
+                break
         self._restore(env, st)
+        self.delta = best
         return best
 
 

@@ -1,0 +1,145 @@
+"""The search tracker inside physics bouts (tracker/bout_search.py): its searches run on one-fighter
+copies and leave the bout untouched (one candidate = the plain policy's bout, bit for bit), a copy
+reproduces the bout's own continuation, a real search is deterministic and changes the bout, and
+the tracker spec parses; the cheaper search variants (SearchSettings.early_accept)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tracker.bout_agents import load_tracker
+from tracker.search_controller import SearchSettings
+
+
+def test_search_tracker_spec():
+    t = load_tracker("search")
+    assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse, t.s.heading_weight) == (16, 45, True, False, 1.0)
+    t = load_tracker("search:4,12:full:reuse:heading=0.5:yawtol=0.2")
+    assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse) == (4, 12, False, True)
+    t = load_tracker("search:incr:first")
+    assert (t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, False)
+    assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
+    with pytest.raises(ValueError, match="needs a number"):
+        load_tracker("search:heading=x")
+    with pytest.raises(ValueError, match="candidates >= 1"):
+        load_tracker("search:0,12")
+    with pytest.raises(FileNotFoundError):
+        load_tracker("search:2,3:/nonexistent/policy.pt")
+
+
+@pytest.fixture(scope="module")
+def setup(boxing_library):
+    from tracker.bout import BoutSetup
+    return BoutSetup.create(boxing_library)
+
+
+def _guard_bout(setup, tracker, seconds=1.0, distance=3.0):
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from test_physics_bout import _facing_start
+    lib = setup.library
+    guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], tracker, BoutConfig(seconds=seconds))
+    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=distance))
+    return bout
+
+
+def _trace(bout, steps):
+    out = []
+    for _ in range(steps):
+        bout.step()
+        out.append(bout.env.data.qpos.copy())
+    return np.array(out)
+
+
+@pytest.mark.realdata
+def test_one_candidate_search_is_the_plain_bout_and_search_is_deterministic(setup):
+    from tracker.bout_search import BoutSearchTracker
+    from tracker.policy import load_policy
+    plain = _trace(_guard_bout(setup, load_policy()), 18)
+    one = _trace(_guard_bout(setup, BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3))), 18)
+    np.testing.assert_array_equal(plain, one)         # the searches never touch the bout's own state
+    s = SearchSettings(candidates=3, lookahead=3, seed=1)
+    a = _trace(_guard_bout(setup, BoutSearchTracker(load_policy(), s)), 18)
+    b = _trace(_guard_bout(setup, BoutSearchTracker(load_policy(), s)), 18)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, plain)               # offsets were chosen and played
+
+
+@pytest.mark.realdata
+def test_one_fighter_copy_reproduces_the_bout(setup):
+    """Fighters 3 m apart (no contact between them): the copy's three steps with the played offsets
+    land within a millimetre of the bout's own three steps."""
+    import mujoco
+
+    from tracker.bout_search import BoutSearchTracker
+    from tracker.policy import load_policy
+    trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=3, lookahead=3, seed=0))
+    bout = _guard_bout(setup, trk)
+    _trace(bout, 3)
+    env = bout.env
+    snap = mujoco.MjData(env.model)
+    mujoco.mj_copyData(snap, env.model, env.data)
+    t0 = env.t
+    _trace(bout, 3)                                    # a search at t0, its offsets played 3 steps
+    after = env.data.qpos.copy()
+    t1 = env.t
+    for k in range(2):
+        mujoco.mj_copyData(env.data, env.model, snap)
+        env.t = t0
+        solo, sc = trk._solos[k], trk.searchers[k]
+        o = trk._load(env, k)
+        for _ in range(3):
+            o, *_ = solo.step(sc._apply(solo, o, trk.delta[k]))
+        fm = env.scene.fighters[k]
+        assert np.abs(solo.data.qpos - after[fm.qpos_slice]).max() < 1e-3
+    env.t = t1
+
+
+@pytest.mark.realdata
+def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):
+    """A 4-step look-ahead from a reference start never sees a fall: with early_accept every search
+    stops at the plain candidate, so the walk is the plain policy's exactly."""
+    from tracker.evaluate import draw_walks, make_setup
+    from tracker.policy import load_policy
+    from tracker.search_controller import SearchController
+    from tracker.walks import LibraryWalks
+    from test_tracker_search import _qpos
+    st = make_setup(LibraryWalks(boxing_library))
+    walk = draw_walks(st.source, 1, 3, 4)[0]
+    plain = _qpos(st, load_policy(), walk, steps=24)
+    early = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True)),
+                  walk, steps=24)
+    full = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2)), walk, steps=24)
+    np.testing.assert_array_equal(plain[0], early[0])
+    assert not np.array_equal(plain[0], full[0])
+
+
+@pytest.mark.realdata
+def test_incremental_early_search_is_the_early_search_exactly(boxing_library):
+    """Extending the kept plain rollout one segment at a time gives the same walk as simulating the
+    whole look-ahead again at every search (the walk's env is the one played, the policy
+    deterministic); and some searches did try candidates (not all plain)."""
+    from tracker.evaluate import draw_walks, make_setup
+    from tracker.policy import load_policy
+    from tracker.search_controller import SearchController
+    from tracker.walks import LibraryWalks
+    from test_tracker_search import _qpos
+    st = make_setup(LibraryWalks(boxing_library))
+    walk = draw_walks(st.source, 1, 3, 4)[0]
+    s = SearchSettings(candidates=3, lookahead=9, seed=2, early_accept=True)
+    outcomes = []
+
+    class Counting(SearchController):
+        def _extend(self, env):
+            outcomes.append(super()._extend(env))
+            return outcomes[-1]
+
+    early = _qpos(st, SearchController(load_policy(), s), walk, steps=45)
+    incr = _qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=45)
+    plain = _qpos(st, load_policy(), walk, steps=45)
+    np.testing.assert_array_equal(early[0], incr[0])
+    assert early[1:] == incr[1:]
+    assert not np.array_equal(early[0], plain[0])
+    assert True in outcomes and False in outcomes, outcomes      # both paths taken

@@ -18,9 +18,9 @@ def test_search_tracker_spec():
     assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse, t.s.heading_weight) == (16, 45, True, False, 1.0)
     t = load_tracker("search:4,12:full:reuse:heading=0.5:yawtol=0.2")
     assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse) == (4, 12, False, True)
+    assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
     t = load_tracker("search:incr:first")
     assert (t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, False)
-    assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
     with pytest.raises(ValueError, match="needs a number"):
         load_tracker("search:heading=x")
     with pytest.raises(ValueError, match="candidates >= 1"):

@@ -53,6 +53,8 @@ def test_one_candidate_is_the_plain_policy_and_search_is_deterministic(setup):
 
 def test_search_controller_by_name_and_errors():
     assert make_controller("search").name == "search"
+    fast = make_controller("search-fast")
+    assert (fast.s.early_accept, fast.s.incremental, fast.s.first_kept) == (True, True, True)
     with pytest.raises(ValueError, match="'joints' or 'layer'"):
         SearchController(None, SearchSettings(space="hips"))
 

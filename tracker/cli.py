@@ -1,7 +1,7 @@
 """`igraph-fight tracker ...`: evaluate tracking controllers on action-graph walks, render them,
 export the generated MuJoCo model.
 
-    igraph-fight tracker eval [--controller pd|balance|learned|search] [--ckpt CKPT] --walks 100 --actions 20 --seed 0
+    igraph-fight tracker eval [--controller pd|balance|learned|search|search-fast] [--ckpt CKPT] --walks 100 --actions 20 --seed 0
                               [--workers N] [--json]
     igraph-fight tracker render --out walk.png|walk.mp4 [--actions 6] [--seed 0] [--seconds 6]
     igraph-fight tracker model FILE.bvh --out fighter.xml [--fighters 2]
@@ -31,7 +31,8 @@ def register(subparsers) -> None:
         q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
         q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, tracker/vforce.py), learned, or "
-                            "search (the learned policy steered by a run-time search: offline, ~0.15x real time)")
+                            "search (the learned policy steered by a run-time search: offline, ~0.15x real time), or "
+                            "search-fast (its cheaper variant: ~1.5x real time, tracker/TRAINING.md fifteenth session)")
         q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
                                       "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
         q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")

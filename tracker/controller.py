@@ -56,7 +56,8 @@ def make_controller(name: str, ckpt: str | None = None) -> Controller:
             pd = replace(pd, balance=BalanceGains().as_tuple(), name="balance")
         return pd
     if name not in CONTROLLERS:
-        mod = {"learned": "tracker.policy", "search": "tracker.search_controller"}.get(name)
+        mod = {"learned": "tracker.policy", "search": "tracker.search_controller",
+               "search-fast": "tracker.search_controller"}.get(name)
         if mod:
             try:  # the module registers the controller when imported
                 import importlib

@@ -10,7 +10,7 @@ session), at the price of simulating candidates x (segment + lookahead) / segmen
 steps per step played at the defaults: about 0.15x real time on one core. A labelled, non-default
 controller for offline work (cutscenes, reference data), not what a game runs per frame:
 
-    igraph-fight tracker eval --controller search [--ckpt POLICY.pt] --walks 20
+    igraph-fight tracker eval --controller search|search-fast [--ckpt POLICY.pt] --walks 20
     igraph-fight tracker render --controller search ...
 
 ``space="layer"`` searches the balance layer's six steering numbers (tracker/vforce.py ``bias``)
@@ -88,8 +88,12 @@ class SearchController:
 
     def describe(self) -> str:
         s = self.s
+        extra = "".join(f", {w}" for on, w in ((s.early_accept, "early acceptance"), (s.incremental, "incremental"),
+                                               (s.first_kept, "first candidate that stays up"), (s.reuse, "reuse"))
+                        if on)
+        extra += f", heading weight {s.heading_weight:g}" if s.heading_weight else ""
         return (f"search over {s.space} ({s.candidates} candidates per {s.segment / 30:.1f} s, {s.lookahead / 30:.1f} s "
-                f"lookahead) steering {self.policy.describe()}")
+                f"lookahead{extra}) steering {self.policy.describe()}")
 
     # ---------------------------------------------------------------- the played action
     def _apply(self, env, obs: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -210,4 +214,9 @@ def load_search(ckpt: str | None = None, settings: SearchSettings = SearchSettin
     return SearchController(load_policy(ckpt), settings)
 
 
+# The cheaper strong search of the fifteenth session (tracker/TRAINING.md): early acceptance,
+# incremental checks, full searches ended at the first candidate that stays up.
+FAST_SEARCH = SearchSettings(early_accept=True, incremental=True, first_kept=True)
+
 register_controller("search", lambda ckpt: load_search(ckpt))
+register_controller("search-fast", lambda ckpt: load_search(ckpt, FAST_SEARCH))

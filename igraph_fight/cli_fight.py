@@ -32,6 +32,10 @@ def register(sub) -> None:
     p.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent",
                    help="physics: which way a fallen fighter faces when it gets up: towards the opponent "
                         "(default) or its fighting direction at the fall")
+    p.add_argument("--tracker", default=None,
+                   help="physics: tracking controller: a policy checkpoint, 'pd', or 'search[:...]' (the policy steered "
+                        "by a run-time search: far fewer falls, 0.1-0.3x real time; tracker/bout_search.py); default "
+                        "$IGRAPH_FIGHT_TRACKER or the shipped policy")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd_fight)
 
@@ -60,8 +64,9 @@ def cmd_fight(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 2
         return cmd_physics_fight(args)
-    if getattr(args, "reset_place", "reference") != "reference" or getattr(args, "reset_facing", "opponent") != "opponent":
-        print("igraph-fight: error: --reset-place / --reset-facing apply to physics bouts only (add --physics)",
+    if (getattr(args, "reset_place", "reference") != "reference" or getattr(args, "reset_facing", "opponent") != "opponent"
+            or getattr(args, "tracker", None)):
+        print("igraph-fight: error: --reset-place / --reset-facing / --tracker apply to physics bouts only (add --physics)",
               file=sys.stderr)
         return 2
     from .bouts import run_style_bout

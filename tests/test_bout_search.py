@@ -15,12 +15,12 @@ from tracker.search_controller import SearchSettings
 
 def test_search_tracker_spec():
     t = load_tracker("search")
-    assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse, t.s.heading_weight) == (16, 45, True, False, 1.0)
+    assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse, t.s.heading_weight) == (16, 45, False, False, 1.0)
     t = load_tracker("search:4,12:full:reuse:heading=0.5:yawtol=0.2")
     assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse) == (4, 12, False, True)
     assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
-    t = load_tracker("search:incr:first")
-    assert (t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, False)
+    t = load_tracker("search:early:incr:first")
+    assert (t.s.early_accept, t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, True, False)
     with pytest.raises(ValueError, match="needs a number"):
         load_tracker("search:heading=x")
     with pytest.raises(ValueError, match="candidates >= 1"):
@@ -114,6 +114,10 @@ def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):
     full = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2)), walk, steps=24)
     np.testing.assert_array_equal(plain[0], early[0])
     assert not np.array_equal(plain[0], full[0])
+    # a heading reward without a yaw tolerance does not stop early acceptance (it once did: cos(inf))
+    early_h = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True,
+                                                                       heading_weight=1.0)), walk, steps=24)
+    np.testing.assert_array_equal(plain[0], early_h[0])
 
 
 @pytest.mark.realdata

@@ -28,6 +28,7 @@ def test_fight_writes_deterministic_artifacts_with_either_decision_rule(tiny_gra
     assert "kinematic bouts only" in capsys.readouterr().err
     # and the get-up rule belongs to physics bouts: refused on a kinematic one
     assert main(["fight", "--graph", str(tiny_graph_file), "--reset-place", "fall", "--out", str(tmp_path / "k")]) == 2
+    assert main(["fight", "--graph", str(tiny_graph_file), "--tracker", "search", "--out", str(tmp_path / "k")]) == 2
     assert "physics bouts only" in capsys.readouterr().err
     assert main(["fight", "--graph", str(tiny_graph_file), "--reset-facing", "fall", "--out", str(tmp_path / "k")]) == 2
     assert "physics bouts only" in capsys.readouterr().err

@@ -22,11 +22,11 @@ MuJoCo's warm start and the contacts of the first substep are recomputed in the 
 so a rollout of the unchanged policy differs from the bout's own continuation in the last digits
 of the solver. No force acts on any root; the search only chooses PD targets.
 
-Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, early acceptance (the plain policy is
-played, nothing else tried, when its own rollout stays up over the look-ahead), and a heading
-reward (SearchSettings.heading_weight). Cost: up to candidates x (segment + lookahead) / segment
-one-fighter control steps per control step and fighter; measured 0.08-0.3x real time for the two
-fighters on one core of the development VM (tracker/BOUTS.md, fifteenth session).
+Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, every candidate tried, and a heading
+reward (SearchSettings.heading_weight). Cost: candidates x (segment + lookahead) / segment = 256
+one-fighter control steps per control step and fighter: 0.074x real time for the two fighters on
+one core of the development VM; early acceptance (":early", the plain policy played when its own
+rollout stays up) 0.27x without the heading reward (tracker/BOUTS.md, fifteenth session).
 """
 from __future__ import annotations
 
@@ -38,9 +38,10 @@ import numpy as np
 from .search_controller import SearchController, SearchSettings
 
 # The bout default (fifteenth session, tracker/BOUTS.md): the walks' strong search (16 candidates,
-# 1.5 s look-ahead) made affordable by early acceptance, with a heading reward that keeps a fighter
-# facing where its reference faces (without it the fighters drift apart facing away).
-BOUT_SEARCH = SearchSettings(candidates=16, lookahead=45, early_accept=True, heading_weight=1.0)
+# 1.5 s look-ahead, every candidate tried) with a heading reward that keeps a fighter facing where
+# its reference faces (without it the fighters drift apart facing away). Early acceptance
+# (":early") is cheaper; with the heading reward it was not measured in bouts.
+BOUT_SEARCH = SearchSettings(candidates=16, lookahead=45, heading_weight=1.0)
 
 
 class BoutSearchTracker:

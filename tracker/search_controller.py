@@ -147,7 +147,7 @@ class SearchController:
             if s.heading_weight or s.yaw_tol < np.inf:
                 cos_err = self._cos_yaw_err(env)
                 r += s.heading_weight * float(np.exp(-10.0 * (1.0 - cos_err)))
-                kept = kept and cos_err >= np.cos(s.yaw_tol)
+                kept = kept and (s.yaw_tol == np.inf or cos_err >= np.cos(s.yaw_tol))
             ret += disc * r
             disc *= s.gamma
             if done:

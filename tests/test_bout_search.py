@@ -91,7 +91,7 @@ def test_one_fighter_copy_reproduces_the_bout(setup):
         solo, sc = trk._solos[k], trk.searchers[k]
         o = trk._load(env, k)
         for _ in range(3):
-            o, *_ = solo.step(sc._apply(solo, o, trk.delta[k]))
+            o, *_ = solo.step(sc._apply(solo, o, sc.delta))
         fm = env.scene.fighters[k]
         assert np.abs(solo.data.qpos - after[fm.qpos_slice]).max() < 1e-3
     env.t = t1

@@ -62,11 +62,8 @@ class BoutSearchTracker:
 
     def describe(self) -> str:
         s = self.s
-        extra = (", early acceptance" if s.early_accept else "") + (", previous offset reused" if s.reuse else "")
-        extra += f", heading weight {s.heading_weight:g}" if s.heading_weight else ""
-        extra += f", yaw tolerance {s.yaw_tol:g} rad" if s.yaw_tol < np.inf else ""
         return (f"bout search ({s.candidates} candidates per {s.segment / 30:.1f} s, {s.lookahead / 30:.1f} s "
-                f"lookahead{extra}, opponent left out of the rollouts) steering {self.policy.describe()}")
+                f"lookahead{s.variants()}, opponent left out of the rollouts) steering {self.policy.describe()}")
 
     # ---------------------------------------------------------------- set-up
     def _solo_env(self, env):
@@ -84,7 +81,6 @@ class BoutSearchTracker:
 
     def reset(self, env) -> None:
         from .reference import Reference
-        self.policy.reset(env)
         solos = self._solo_env(env)
         self.k = 0
         self.refs, self.searchers = [], []
@@ -98,8 +94,7 @@ class BoutSearchTracker:
             sc = SearchController(self.policy, replace(self.s, seed=self.s.seed + k))
             sc.reset(solos[k])
             self.searchers.append(sc)
-        self.policy.reset(env)          # the searchers' resets set the policy's PD on their scenes
-        self.delta = [np.zeros(c.n_act) for c in env._cache]
+        self.policy.reset(env)          # after the searchers' resets, which set the policy's PD on their scenes
 
     # ---------------------------------------------------------------- one fighter's search
     def _load(self, env, k: int):
@@ -131,19 +126,15 @@ class BoutSearchTracker:
 
     def act(self, env, obs: np.ndarray) -> np.ndarray:
         if self.k % self.s.segment == 0:
-            for k in range(env.n_fighters):
+            for k, sc in enumerate(self.searchers):
                 if self.idle is not None and self.idle[k]:
-                    self.delta[k] = np.zeros(env._cache[k].n_act)
-                    self.searchers[k].delta = self.delta[k]
+                    sc.delta = np.zeros_like(sc.delta)
                     continue
                 o = self._load(env, k)
                 self._refresh_reward_ref(k, env.t)
-                self.delta[k] = self.searchers[k]._search(self._solos[k], o)
+                sc._search(self._solos[k], o)            # keeps its choice as sc.delta
         self.k += 1
         base = 0.0 if env.config.residual_actions else env.reference_targets()
         res = self.policy.act(env, obs) - base
-        off = []
-        for k, c in enumerate(env._cache):
-            r = res[sum(cc.n_act for cc in env._cache[:k]):][:c.n_act]
-            off.append(np.clip(r + self.delta[k], -self.policy.action_clip, self.policy.action_clip))
-        return np.concatenate(off) + base
+        delta = np.concatenate([sc.delta for sc in self.searchers])   # fighters' actions are consecutive
+        return np.clip(res + delta, -self.policy.action_clip, self.policy.action_clip) + base

@@ -56,6 +56,17 @@ class SearchSettings:
     heading_weight: float = 0.0   # extra reward heading_weight * exp(-10 (1 - cos(yaw error))) per step
     yaw_tol: float = float("inf")  # early_accept also needs the pelvis yaw within this (rad) of the reference's
 
+    def variants(self) -> str:
+        """The non-default knobs in words (for describe()), e.g. ", early acceptance, heading weight 1"."""
+        words = [w for on, w in ((self.early_accept, "early acceptance"), (self.incremental, "incremental"),
+                                 (self.first_kept, "first candidate that stays up"), (self.reuse, "previous offset reused"))
+                 if on]
+        if self.heading_weight:
+            words.append(f"heading weight {self.heading_weight:g}")
+        if self.yaw_tol < np.inf:
+            words.append(f"yaw tolerance {self.yaw_tol:g} rad")
+        return "".join(", " + w for w in words)
+
 
 class SearchController:
     """Controller (tracker.controller) wrapping a LearnedController; one-fighter envs."""
@@ -88,12 +99,8 @@ class SearchController:
 
     def describe(self) -> str:
         s = self.s
-        extra = "".join(f", {w}" for on, w in ((s.early_accept, "early acceptance"), (s.incremental, "incremental"),
-                                               (s.first_kept, "first candidate that stays up"), (s.reuse, "reuse"))
-                        if on)
-        extra += f", heading weight {s.heading_weight:g}" if s.heading_weight else ""
         return (f"search over {s.space} ({s.candidates} candidates per {s.segment / 30:.1f} s, {s.lookahead / 30:.1f} s "
-                f"lookahead{extra}) steering {self.policy.describe()}")
+                f"lookahead{s.variants()}) steering {self.policy.describe()}")
 
     # ---------------------------------------------------------------- the played action
     def _apply(self, env, obs: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -131,6 +138,10 @@ class SearchController:
         c = env._cache[0]
         return float(np.cos(_heading(env.data.xmat[c.pelvis].reshape(3, 3), c.lateral) - self.rr.heading[env.t]))
 
+    def _yaw_ok(self, cos_err: float) -> bool:
+        """The pelvis yaw within yaw_tol of the reference's (always, without a tolerance)."""
+        return self.s.yaw_tol == np.inf or cos_err >= np.cos(self.s.yaw_tol)
+
     def _score(self, env, obs: np.ndarray, delta: np.ndarray, keep_tail: bool = False) -> tuple[float, bool]:
         """Discounted tracking return of one candidate, and whether its rollout stayed up and on the
         reference to the end of the look-ahead (or of the reference). ``keep_tail``: remember the
@@ -147,7 +158,7 @@ class SearchController:
             if s.heading_weight or s.yaw_tol < np.inf:
                 cos_err = self._cos_yaw_err(env)
                 r += s.heading_weight * float(np.exp(-10.0 * (1.0 - cos_err)))
-                kept = kept and (s.yaw_tol == np.inf or cos_err >= np.cos(s.yaw_tol))
+                kept = kept and self._yaw_ok(cos_err)
             ret += disc * r
             disc *= s.gamma
             if done:
@@ -168,7 +179,7 @@ class SearchController:
             if env.done:
                 break
             o, _, _, info = env.step(self._apply(env, o, zero))
-            if self._lost(env, info) or (self.s.yaw_tol < np.inf and self._cos_yaw_err(env) < np.cos(self.s.yaw_tol)):
+            if self._lost(env, info) or (self.s.yaw_tol < np.inf and not self._yaw_ok(self._cos_yaw_err(env))):
                 self._tail = None
                 return False
         mujoco.mj_copyData(self._tail_snap, env.model, env.data)

@@ -254,3 +254,53 @@ def test_fallen_fighter_gets_up_where_the_rule_says(setup, place):
             assert np.linalg.norm(got - want) < 0.05, (got, want)
             return
     pytest.fail("no fighter fell and got up within the bout")
+
+
+def test_planned_hit_windows_and_how_near_the_fist_came(setup):
+    """A punch the kinematic simulator plans to land: its strike window is offered to the tracker
+    (PhysicsBout.planned_windows: the library window widened by window_slack, the strike's fist)
+    while it is open and not after; once it has passed, the planned event records how near the fist
+    came (closest_m: 0 if it landed) and the summary lists it."""
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.policy import load_policy
+    lib = setup.library
+    calm = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    lo, hi = BoutConfig().window_slack
+    policy = load_policy()
+    found = None
+    for a in [x for x in range(lib.n_actions) if lib.labels[x] in ("straight", "jab")][:8]:
+        k = int(lib.strike_offsets[a])
+        side = int(setup_side(lib, k))
+        w = (int(lib.strike_w0[k]) - lo, int(lib.strike_w1[k]) + hi)
+        for d in (0.6, 0.7, 0.8, 0.9):
+            bout = PhysicsBout(setup, [MenuAgent([a], "puncher"), MenuAgent(calm, "target")], policy, BoutConfig(seconds=3.0))
+            bout.start(seed=0, initial=_facing_start(setup, a, distance=d))
+            offered = []
+            while bout.env.t < w[1] + 2:
+                offered.append(bout.planned_windows(0, bout.env.t))
+                bout.step()
+            first = [p for p in bout.planned_events if p["attacker"] == 0 and p["inst"] == 1 and p["strike"] == 0]
+            if first:
+                found = (bout, first[0], w, side, offered)
+                break
+        if found:
+            break
+    if found is None:
+        pytest.skip("no planned hit of a first strike at these distances")
+    bout, p, w, side, offered = found
+    assert (w[0], w[1], side) in [x for o in offered for x in o]
+    assert bout.planned_windows(0, w[1]) == []                         # passed: not offered any more
+    res = bout.finish()
+    s = res.summary()
+    assert len(s["planned_closest_m"]) == len(res.planned_events)
+    if p.get("realised"):
+        assert s["planned_closest_m"][res.planned_events.index(p)] == 0.0
+    else:
+        assert 0.0 <= p["closest_m"] < 1.0
+
+
+def setup_side(lib, k: int) -> int:
+    """Fist side of strike k as the judge reads it (0 left, 1 right, -1 other)."""
+    parts = lib.parts
+    j = int(lib.strike_joint[k])
+    return 0 if j in (parts.get("l_fist"), parts.get("l_wrist")) else 1 if j in (parts.get("r_fist"), parts.get("r_wrist")) else -1

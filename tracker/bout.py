@@ -41,7 +41,10 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   the reference), by the strike's own fist; one hit per strike window (debounced). Fist contacts
   outside a strike window are logged as touches, not hits. Forces are clipped at
   ``force_clip_n`` (200 N) for the damage sum (the competitive-sports paper's r_match).
-  A planned hit is realised when the same strike of the same action instance lands physically.
+  A planned hit is realised when the same strike of the same action instance lands physically;
+  each planned hit also records ``closest_m``, how near the strike's fist came to the opponent's
+  head, chest or belly at the control steps of its open window while both stood (a search tracker
+  may aim the open windows: ``planned_windows``).
 * Falls (tracker.fall.detect_fall, the one definition: a non-foot geom on the floor, or the pelvis
   35 cm below the reference pelvis): the fall is counted, the fighter lies for ``fall_pause_s``
   (its PD holds its last reference pose; no hits by or on it count), then it is reset to a
@@ -182,6 +185,8 @@ class PhysicsBout:
             self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
         if hasattr(self.tracker, "idle"):          # a search tracker skips fallen fighters
             self.tracker.idle = [f.down for f in self.F]
+        if hasattr(self.tracker, "aims"):          # and may aim the planned strikes
+            self.tracker.aims = [self.planned_windows(k, env.t) for k in (0, 1)]
         act = self.tracker.act(env, self._obs)
         for f in self.F:
             if f.down:
@@ -268,6 +273,29 @@ class PhysicsBout:
                     float(self.F[j].down)]
         out += [self.judge.fist_target_distance(d, k, 1 - k), self.judge.fist_target_distance(d, 1 - k, k)]
         return np.array(out, dtype=np.float64)
+
+    def planned_windows(self, k: int, t: int) -> list[tuple[int, int, int]]:
+        """(first step, end step, fist side: 0 left, 1 right, -1 either) of fighter k's planned hits
+        that have not landed and whose strike window (widened by ``window_slack``, as judged) has
+        not passed at control step t."""
+        return [(w0, w1, side) for _, w0, w1, side in self._open_planned(k, t)]
+
+    def _open_planned(self, k: int, t: int) -> list[tuple[dict, int, int, int]]:
+        """(planned event, first step, end step, fist side) for planned_windows."""
+        f = self.F[k]
+        lib = self.lib
+        lo, hi = self.config.window_slack
+        seg_of = {s.inst: s for s in f.segments[-4:]}
+        out = []
+        for p in self.planned_events[-40:]:
+            seg = seg_of.get(p["inst"]) if p["attacker"] == k else None
+            if seg is None or f.realised.get(p["inst"], 0) >> p["strike"] & 1:
+                continue
+            j = int(lib.strike_offsets[p["action"]]) + p["strike"]
+            w1 = seg.t0 + int(lib.strike_w1[j]) + hi
+            if w1 > t:
+                out.append((p, seg.t0 + int(lib.strike_w0[j]) - lo, w1, int(self.judge.strike_side[j])))
+        return out
 
     # ------------------------------------------------------------------ references
     def _write_segment(self, k: int, t0: int, action: int, prev: int | None, pose: tuple[float, float, float],
@@ -461,6 +489,14 @@ class PhysicsBout:
                 f.reward_total[key] += val
             f.steps_since += 1
         self._gap = min(gaps)
+        # how near each planned hit's fist came while its window was open (m; the log's closest_m)
+        for k in (0, 1):
+            if self.F[k].down or self.F[1 - k].down:
+                continue
+            for p, w0, w1, side in self._open_planned(k, t):
+                if w0 <= t < w1:
+                    g = self.judge.fist_target_distance(d, k, 1 - k, side)
+                    p["closest_m"] = round(min(p.get("closest_m", np.inf), g), 4)
 
     # ------------------------------------------------------------------ falls
     def _falls_and_resets(self, t: int, info) -> bool:

@@ -87,10 +87,13 @@ class MenuAgent:
 def load_tracker(spec: str | None = None):
     """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
     (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
-    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:CKPT]"``: that
+    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:spread=F][:duel][:CKPT]"``: that
     policy steered by a run-time search (tracker.bout_search; default tracker.bout_search.BOUT_SEARCH;
     C candidates, L look-ahead control steps, early acceptance on or off, and the other knobs of
-    tracker.search_controller.SearchSettings; offline quality, slower than real time).
+    tracker.search_controller.SearchSettings; aim=W: the planned strikes aimed with weight W (spread=F:
+    the arm offsets' sigma times F while aiming); duel:
+    the rollouts in a copy of the whole bout, the opponent on its plain policy;
+    offline quality, slower than real time).
     The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
     spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
     if spec is not None and (spec == "search" or spec.startswith("search:")):
@@ -111,13 +114,13 @@ _FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept"}   # sp
 
 
 def load_bout_search(spec: str):
-    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:CKPT]`` ->
+    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:spread=F][:duel][:CKPT]`` ->
     tracker.bout_search.BoutSearchTracker (see load_tracker)."""
     from dataclasses import replace
 
     from .bout_search import BOUT_SEARCH, BoutSearchTracker
     from .policy import load_policy
-    settings, ckpt = BOUT_SEARCH, None
+    settings, ckpt, aim, duel, spread = BOUT_SEARCH, None, 0.0, False, 1.0
     for tok in spec.split(":")[1:]:
         c, comma, la = tok.partition(",")
         if comma and c.isdigit() and la.isdigit():
@@ -128,6 +131,17 @@ def load_bout_search(spec: str):
             settings = replace(settings, early_accept=tok == "early")
         elif tok in _FLAGS:
             settings = replace(settings, **{_FLAGS[tok]: True})
+        elif tok == "duel":
+            duel = True
+        elif tok.startswith(("aim=", "spread=")):
+            name, _, val = tok.partition("=")
+            try:
+                if name == "aim":
+                    aim = float(val)
+                else:
+                    spread = float(val)
+            except ValueError:
+                raise ValueError(f"tracker {spec!r}: {name}= needs a number") from None
         elif tok.startswith(("heading=", "yawtol=")):
             name, _, val = tok.partition("=")
             try:
@@ -136,7 +150,7 @@ def load_bout_search(spec: str):
                 raise ValueError(f"tracker {spec!r}: {name}= needs a number") from None
         elif tok:
             ckpt = tok
-    return BoutSearchTracker(load_policy(ckpt), settings)
+    return BoutSearchTracker(load_policy(ckpt), settings, aim=aim, duel=duel, aim_spread=spread)
 
 
 def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", future: str = "calibrated"):

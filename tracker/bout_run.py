@@ -66,6 +66,10 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     return summary
 
 
+def _median(xs: list) -> float | None:
+    return float(np.median(xs)) if xs else None
+
+
 def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_bouts: int = 10, seconds: float = 60.0,
                depth_a: int = 5, depth_b: int = 5, seed0: int = 0, tracker: str | None = None,
                root_assist: bool = False, log=print, config: BoutConfig | None = None) -> dict:
@@ -101,5 +105,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
             "falls_per_min_a": tot("falls_a") / minutes, "falls_per_min_b": tot("falls_b") / minutes,
             "planned_hits": p, "planned_realised": tot("planned_realised"),
             "planned_realised_ratio": tot("planned_realised") / p if p else None,
-            "unplanned_hits": tot("unplanned_hits"), "mean_distance_m": tot("mean_distance_m") / max(n_bouts, 1),
+            "unplanned_hits": tot("unplanned_hits"),
+            "planned_closest_m_median": _median([g for r in rows for g in r["planned_closest_m"] if g is not None]),
+            "mean_distance_m": tot("mean_distance_m") / max(n_bouts, 1),
             "realtime_factor_mean": tot("realtime_factor") / max(n_bouts, 1), "bouts": rows}

@@ -22,6 +22,15 @@ MuJoCo's warm start and the contacts of the first substep are recomputed in the 
 so a rollout of the unchanged policy differs from the bout's own continuation in the last digits
 of the solver. No force acts on any root; the search only chooses PD targets.
 
+Two options (sixteenth session, tracker/BOUTS.md): ``duel`` rolls the candidates out in a copy of
+the whole bout (both bodies simulated, the opponent on its plain policy: it does not search in
+there), so a rollout sees the opponent's arms in the way of a punch, clinches and pushes, at about
+twice the cost; ``aim`` adds a reward for the fighter's planned hits (PhysicsBout.planned_windows):
+inside each strike window, how near the strike's fist comes to the opponent's head, chest or belly
+(the opponent's geoms as simulated in duel rollouts, else where they are now moved on by its
+reference). Planned hits missed mostly because the fist met the opponent's guard, which the
+kinematic simulator does not model (its targets are spheres, a guard action no defence).
+
 Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, every candidate tried, and a heading
 reward (SearchSettings.heading_weight). Cost: candidates x (segment + lookahead) / segment = 256
 one-fighter control steps per control step and fighter: 0.074x real time for the two fighters on
@@ -35,6 +44,8 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
+from .judging import fist_gap
+from .model import EFFECTOR_LABELS, TARGET_LABELS
 from .search_controller import SearchController, SearchSettings
 
 # The bout default (fifteenth session, tracker/BOUTS.md): the walks' strong search (16 candidates,
@@ -50,20 +61,34 @@ class BoutSearchTracker:
 
     name = "search"
 
-    def __init__(self, policy, settings: SearchSettings = BOUT_SEARCH) -> None:
+    def __init__(self, policy, settings: SearchSettings = BOUT_SEARCH, aim: float = 0.0,
+                 aim_sigma_m: float = 0.15, duel: bool = False, aim_spread: float = 1.0) -> None:
         if settings.space != "joints":
             raise ValueError("the bout search steers joint offsets (space='joints')")
+        if aim < 0 or aim_sigma_m <= 0 or aim_spread <= 0:
+            raise ValueError("aim weight >= 0, aim sigma > 0 (m) and aim spread > 0")
         self.policy = policy
         self.s = settings
+        self.aim = aim
+        self.aim_sigma_m = aim_sigma_m
+        self.duel = duel
+        self.aim_spread = aim_spread            # arm offsets' sigma multiplied by this while aiming
         self.obs_future = policy.obs_future
         # Set by PhysicsBout before every act: True for a fighter that is down (no search for it).
         self.idle: list[bool] | None = None
+        # Set by PhysicsBout before every act: per fighter, its planned hits' windows still to come,
+        # [(first step, end step, fist side or -1)] (PhysicsBout.planned_windows).
+        self.aims: list[list[tuple[int, int, int]]] | None = None
         self._solo_key = None
 
     def describe(self) -> str:
         s = self.s
+        aim = (f", planned strikes aimed (weight {self.aim:g}, {self.aim_sigma_m:g} m"
+               + (f", arm offsets x{self.aim_spread:g}" if self.aim_spread != 1 else "") + ")") if self.aim else ""
+        opp = ("the opponent in the rollouts on its plain policy" if self.duel else
+               "opponent left out of the rollouts")
         return (f"bout search ({s.candidates} candidates per {s.segment / 30:.1f} s, {s.lookahead / 30:.1f} s "
-                f"lookahead{s.variants()}, opponent left out of the rollouts) steering {self.policy.describe()}")
+                f"lookahead{s.variants()}{aim}, {opp}) steering {self.policy.describe()}")
 
     # ---------------------------------------------------------------- set-up
     def _solo_env(self, env):
@@ -76,6 +101,9 @@ class BoutSearchTracker:
         if self._solo_key != key:
             self._solos = [TrackingEnv(build_fighter_scene(specs[k], 1, env.scene.options), env.config)
                            for k in range(env.n_fighters)]
+            # the duel copy: the whole bout scene again (same layout, so the same addresses and geom ids)
+            self._duel = (TrackingEnv(build_fighter_scene(list(specs), len(specs), env.scene.options), env.config)
+                          if self.duel else None)
             self._solo_key = key
         return self._solos
 
@@ -94,6 +122,25 @@ class BoutSearchTracker:
             sc = SearchController(self.policy, replace(self.s, seed=self.s.seed + k))
             sc.reset(solos[k])
             self.searchers.append(sc)
+        # fist geoms of each one-fighter copy (per side) and target geoms of each bout fighter
+        lab = solos[0].scene.fighters[0].geom_label
+        self._fists = [np.concatenate([lab[e] for e in EFFECTOR_LABELS])] + [np.asarray(lab[e]) for e in EFFECTOR_LABELS]
+        self._fist_r = [solos[0].model.geom_size[g, 0].copy() for g in self._fists]
+        from .imitation import leg_mask
+        self._legs = leg_mask(solos[0].scene)
+        self._bout_fists = []                   # the same per fighter of the bout (and duel) scene
+        for fm in env.scene.fighters:
+            gl = fm.geom_label
+            self._bout_fists.append([np.concatenate([gl[e] for e in EFFECTOR_LABELS])] + [np.asarray(gl[e]) for e in EFFECTOR_LABELS])
+        cap = mujoco.mjtGeom.mjGEOM_CAPSULE
+        self._targets = []
+        for fm in env.scene.fighters:
+            g = np.concatenate([fm.geom_label[t] for t in TARGET_LABELS])
+            self._targets.append((g, env.model.geom_size[g, 0].copy(),
+                                  np.where(env.model.geom_type[g] == cap, env.model.geom_size[g, 1], 0.0)))
+        if self._duel is not None:
+            self._duel.refs = env.refs
+            self.policy.reset(self._duel)
         self.policy.reset(env)          # after the searchers' resets, which set the policy's PD on their scenes
 
     # ---------------------------------------------------------------- one fighter's search
@@ -111,6 +158,18 @@ class BoutSearchTracker:
         mujoco.mj_forward(solo.model, sd)
         return solo._obs_all()
 
+    def _load_duel(self, env):
+        """Put the whole bout state into the duel copy; its observation (both fighters)."""
+        du = self._duel
+        du.data.qpos[:] = env.data.qpos
+        du.data.qvel[:] = env.data.qvel
+        du.data.act[:] = 0.0
+        du.data.time = env.data.time
+        du.refs = env.refs
+        du.t, du.t_end, du.done = env.t, env.t_end, False
+        mujoco.mj_forward(du.model, du.data)
+        return du._obs_all()
+
     def _refresh_reward_ref(self, k: int, t: int) -> None:
         """The search's reward reference over the frames its rollouts can read (the buffer changes
         as the bout plays, so it is rebuilt for that window before every search)."""
@@ -124,15 +183,74 @@ class BoutSearchTracker:
         for name in ("ee_local", "up", "heading", "com_vel"):
             getattr(sc.rr, name)[a:b] = getattr(w, name)
 
+    def _aim_reward(self, env, k: int):
+        """The rollouts' extra reward for fighter k's planned strikes within the search's horizon:
+        per step inside a strike window, aim * exp(-(gap / aim_sigma_m)^2), gap the distance of the
+        strike's fist to the opponent's head, chest or belly (judging.fist_gap). In duel rollouts the
+        opponent's geoms are where its simulated body is (its arms may be in the way: the gap is
+        to the targets, which the fist cannot reach through a guard); otherwise the opponent is not
+        in the rollouts and its target geoms are taken where they are now, moved on by its reference
+        pelvis displacement (a named approximation). None when nothing is aimed."""
+        if not self.aim or self.aims is None:
+            return None
+        t0, t1 = env.t, env.t + self.s.segment + self.s.lookahead
+        wins = [(a, b, side) for a, b, side in self.aims[k] if a < t1 and b > t0]
+        if not wins:
+            return None
+        o = 1 - k
+        g, tr, thl = self._targets[o]
+        c0 = env.data.geom_xpos[g].copy()
+        ax = env.data.geom_xmat[g][:, [2, 5, 8]].copy()
+        ref_o = self.refs[o]
+        base = ref_o.qpos[env.t, :2].copy()
+        shift = np.zeros(3)
+        sd = self._solos[k].data
+        w, inv_s2 = self.aim, 1.0 / self.aim_sigma_m ** 2
+        if self._duel is not None:
+            dd = self._duel.data
+            fists = self._bout_fists[k]
+
+            def extra_duel(du) -> float:
+                tau = du.t
+                r = 0.0
+                for a, b, side in wins:
+                    if a <= tau < b:
+                        fg = fists[side + 1]
+                        gap = fist_gap(dd.geom_xpos[fg], self._fist_r[side + 1], dd.geom_xpos[g],
+                                       dd.geom_xmat[g][:, [2, 5, 8]], tr, thl)
+                        r += w * float(np.exp(-gap * gap * inv_s2))
+                return r
+            return extra_duel
+
+        def extra(solo) -> float:
+            tau = solo.t
+            r = 0.0
+            for a, b, side in wins:
+                if a <= tau < b:
+                    shift[:2] = ref_o.qpos[min(tau, ref_o.n_frames - 1), :2] - base
+                    fg = self._fists[side + 1]
+                    gap = fist_gap(sd.geom_xpos[fg], self._fist_r[side + 1], c0 + shift, ax, tr, thl)
+                    r += w * float(np.exp(-gap * gap * inv_s2))
+            return r
+        return extra
+
     def act(self, env, obs: np.ndarray) -> np.ndarray:
         if self.k % self.s.segment == 0:
             for k, sc in enumerate(self.searchers):
                 if self.idle is not None and self.idle[k]:
                     sc.delta = np.zeros_like(sc.delta)
                     continue
-                o = self._load(env, k)
                 self._refresh_reward_ref(k, env.t)
-                sc._search(self._solos[k], o)            # keeps its choice as sc.delta
+                sc.extra = self._aim_reward(env, k)
+                sig = sc.sig
+                if sc.extra is not None and self.aim_spread != 1.0:
+                    sc.sig = np.where(self._legs, sig, sig * self.aim_spread)
+                if self._duel is not None:
+                    sc.fighter = k
+                    sc._search(self._duel, self._load_duel(env))
+                else:
+                    sc._search(self._solos[k], self._load(env, k))   # keeps its choice as sc.delta
+                sc.sig = sig
         self.k += 1
         base = 0.0 if env.config.residual_actions else env.reference_targets()
         res = self.policy.act(env, obs) - base

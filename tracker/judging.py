@@ -46,6 +46,8 @@ class HitJudge:
             self.fist_geoms.append(np.array(fg, dtype=np.int64))
             self.target_geoms.append(np.array(tg, dtype=np.int64))
         self._fist_geo = [(g, model.geom_size[g, 0].copy()) for g in self.fist_geoms]
+        self._side_geo = [[(g[self.fist_side[g] == sd], model.geom_size[g[self.fist_side[g] == sd], 0].copy())
+                           for sd in (0, 1)] for g in self.fist_geoms]
         cap = mujoco.mjtGeom.mjGEOM_CAPSULE
         self._target_geo = [(g, model.geom_size[g, 0].copy(), np.where(model.geom_type[g] == cap, model.geom_size[g, 1], 0.0))
                             for g in self.target_geoms]
@@ -156,16 +158,21 @@ class HitJudge:
                     return seg, j
         return None
 
-    def fist_target_distance(self, d: mujoco.MjData, a: int, b: int) -> float:
-        """Closest distance (m, >= 0) between a's fist spheres and b's head/chest/belly geoms
-        (spheres, or capsules as segments with a radius)."""
-        fg, fr = self._fist_geo[a]
+    def fist_target_distance(self, d: mujoco.MjData, a: int, b: int, side: int = -1) -> float:
+        """Closest distance (m, >= 0) between a's fist spheres (both, or ``side`` 0 left / 1 right)
+        and b's head/chest/belly geoms (spheres, or capsules as segments with a radius)."""
+        fg, fr = self._fist_geo[a] if side < 0 else self._side_geo[a][side]
         tg, tr, thl = self._target_geo[b]
-        p = d.geom_xpos[fg]                                   # (F, 3)
-        c = d.geom_xpos[tg]                                   # (G, 3)
-        ax = d.geom_xmat[tg][:, [2, 5, 8]]                    # capsule axis (local z) in world
-        rel = p[:, None, :] - c[None, :, :]                   # (F, G, 3)
-        s = np.clip((rel * ax[None]).sum(-1), -thl[None], thl[None])
-        q = rel - s[..., None] * ax[None]
-        dist = np.sqrt((q * q).sum(-1)) - fr[:, None] - tr[None, :]
-        return max(float(dist.min()), 0.0)
+        return fist_gap(d.geom_xpos[fg], fr, d.geom_xpos[tg], d.geom_xmat[tg][:, [2, 5, 8]], tr, thl)
+
+
+def fist_gap(fist_xyz: np.ndarray, fist_r: np.ndarray, tgt_xyz: np.ndarray, tgt_axis: np.ndarray,
+             tgt_r: np.ndarray, tgt_half: np.ndarray) -> float:
+    """Closest distance (m, >= 0) between fist spheres (F, 3 centres; F radii) and target geoms
+    (G, 3 centres; G, 3 unit axes; G radii; G half-lengths, 0 for a sphere, capsules as segments
+    with a radius)."""
+    rel = fist_xyz[:, None, :] - tgt_xyz[None, :, :]                   # (F, G, 3)
+    s = np.clip((rel * tgt_axis[None]).sum(-1), -tgt_half[None], tgt_half[None])
+    q = rel - s[..., None] * tgt_axis[None]
+    dist = np.sqrt((q * q).sum(-1)) - fist_r[:, None] - tgt_r[None, :]
+    return max(float(dist.min()), 0.0)

@@ -78,6 +78,9 @@ class SearchController:
             raise ValueError(f"search space {settings.space!r}: 'joints' or 'layer'")
         self.policy = policy
         self.s = settings
+        # The fighter searched for in the envs it is given: 0 in its own one-fighter env; the bout
+        # search (tracker.bout_search) may hand it a two-fighter copy of the bout with another index.
+        self.fighter = 0
 
     def reset(self, env) -> None:
         from .imitation import leg_mask
@@ -93,9 +96,11 @@ class SearchController:
                     else np.where(leg_mask(env.scene), self.s.sigma_legs, self.s.sigma))
         self.k = 0
         self.delta = np.zeros(len(self.sig))
-        self._snap = mujoco.MjData(env.model)
+        self._snaps = {}                        # model -> (state snapshot, tail snapshot)
         self._tail = None                       # (t, sim_time, done, obs) at the end of the kept plain rollout
-        self._tail_snap = mujoco.MjData(env.model)
+        # extra(env) -> float: a reward added to every rollout step's (None: none); the bout search
+        # sets it for the strikes it aims (tracker.bout_search)
+        self.extra = None
 
     def describe(self) -> str:
         s = self.s
@@ -105,10 +110,15 @@ class SearchController:
     # ---------------------------------------------------------------- the played action
     def _apply(self, env, obs: np.ndarray, delta: np.ndarray) -> np.ndarray:
         if self.s.space == "layer":
-            env.balance.bias[0] = delta
+            env.balance.bias[self.fighter] = delta
             return self.policy.act(env, obs)
         base = 0.0 if env.config.residual_actions else env.reference_targets()
         res = self.policy.act(env, obs) - base
+        if env.n_fighters > 1:                  # the offset on this fighter's actions only
+            off = sum(c.n_act for c in env._cache[:self.fighter])
+            full = np.zeros_like(res)
+            full[off:off + len(delta)] = delta
+            delta = full
         return np.clip(res + delta, -self.policy.action_clip, self.policy.action_clip) + base
 
     def act(self, env, obs: np.ndarray) -> np.ndarray:
@@ -118,24 +128,32 @@ class SearchController:
         return self._apply(env, obs, self.delta)
 
     # ---------------------------------------------------------------- the search
+    def _snap_of(self, env, which: int) -> mujoco.MjData:
+        """Scratch MjData for env's model: 0 the saved state, 1 the kept rollout's end."""
+        if id(env.model) not in self._snaps:
+            self._snaps[id(env.model)] = (env.model, mujoco.MjData(env.model), mujoco.MjData(env.model))
+        return self._snaps[id(env.model)][1 + which]
+
     def _save(self, env):
         # the whole MjData, not only the integration state: the policy's observation reads derived
         # quantities (contacts, body velocities) that mj_setState + mj_kinematics would leave stale
-        mujoco.mj_copyData(self._snap, env.model, env.data)
+        mujoco.mj_copyData(self._snap_of(env, 0), env.model, env.data)
         return env.t, env.sim_time, env.done
 
     def _restore(self, env, st) -> None:
-        mujoco.mj_copyData(env.data, env.model, self._snap)
+        mujoco.mj_copyData(env.data, env.model, self._snap_of(env, 0))
         env.t, env.sim_time, env.done = st
 
     def _lost(self, env, info) -> bool:
         """A fall, or the pelvis more than drift_m from the reference's."""
-        dxy = env.data.qpos[:2] - env.refs[0].qpos[env.t, :2]
-        return info.fall[0] is not None or float(dxy @ dxy) > self.s.drift_m ** 2
+        k = self.fighter
+        a = env._cache[k].qpos.start
+        dxy = env.data.qpos[a:a + 2] - env.refs[k].qpos[env.t, :2]
+        return info.fall[k] is not None or float(dxy @ dxy) > self.s.drift_m ** 2
 
     def _cos_yaw_err(self, env) -> float:
         from .env import _heading
-        c = env._cache[0]
+        c = env._cache[self.fighter]
         return float(np.cos(_heading(env.data.xmat[c.pelvis].reshape(3, 3), c.lateral) - self.rr.heading[env.t]))
 
     def _yaw_ok(self, cos_err: float) -> bool:
@@ -154,17 +172,19 @@ class SearchController:
             o, _, done, info = env.step(self._apply(env, o, delta if j < s.segment else zero))
             if self._lost(env, info):
                 return ret, False
-            r = tracking_reward(env, self.rr, s.reward_weights)
+            r = tracking_reward(env, self.rr, s.reward_weights, self.fighter)
             if s.heading_weight or s.yaw_tol < np.inf:
                 cos_err = self._cos_yaw_err(env)
                 r += s.heading_weight * float(np.exp(-10.0 * (1.0 - cos_err)))
                 kept = kept and self._yaw_ok(cos_err)
+            if self.extra is not None:
+                r += self.extra(env)
             ret += disc * r
             disc *= s.gamma
             if done:
                 break
         if kept and keep_tail:
-            mujoco.mj_copyData(self._tail_snap, env.model, env.data)
+            mujoco.mj_copyData(self._snap_of(env, 1), env.model, env.data)
             self._tail = (env.t, env.sim_time, env.done, o.copy())
         return ret, kept
 
@@ -172,7 +192,7 @@ class SearchController:
         """Extend the kept plain rollout by one segment (the env is left at its end); False, and the
         rollout forgotten, when the extension falls, drifts or turns off the yaw tolerance."""
         t, sim_time, done, o = self._tail
-        mujoco.mj_copyData(env.data, env.model, self._tail_snap)
+        mujoco.mj_copyData(env.data, env.model, self._snap_of(env, 1))
         env.t, env.sim_time, env.done = t, sim_time, done
         zero = np.zeros(len(self.sig))
         for _ in range(self.s.segment):
@@ -182,14 +202,17 @@ class SearchController:
             if self._lost(env, info) or (self.s.yaw_tol < np.inf and not self._yaw_ok(self._cos_yaw_err(env))):
                 self._tail = None
                 return False
-        mujoco.mj_copyData(self._tail_snap, env.model, env.data)
+        mujoco.mj_copyData(self._snap_of(env, 1), env.model, env.data)
         self._tail = (env.t, env.sim_time, env.done, o.copy())
         return True
 
     def _search(self, env, obs: np.ndarray) -> np.ndarray:
         """The best offset from the env's current state (left as it was); also kept as ``delta``."""
         st = self._save(env)
-        incremental = self.s.early_accept and self.s.incremental
+        # an extra reward (an aimed strike) is what a rollout's staying up says nothing about: no
+        # early or first-kept stop while one is set
+        early = self.s.early_accept and self.extra is None
+        incremental = early and self.s.incremental
         if incremental and self._tail is not None and not np.any(self.delta):
             ok = self._extend(env)
             self._restore(env, st)
@@ -210,7 +233,7 @@ class SearchController:
             ret, kept = self._score(env, obs, delta, keep_tail=incremental and k == 0)
             if ret > best_ret:
                 best, best_ret = delta, ret
-            if kept and ((k == 0 and self.s.early_accept) or (k > 0 and self.s.first_kept)):
+            if kept and ((k == 0 and early) or (k > 0 and self.s.first_kept and self.extra is None)):
                 if k > 0:
                     best = delta              # the first that stays up, not the best return so far
                 break

@@ -360,17 +360,17 @@ def _yaw_mat(yaw: float) -> np.ndarray:
     return np.array([[cy, sy, 0.0], [-sy, cy, 0.0], [0.0, 0.0, 1.0]])
 
 
-def tracking_reward(env, rr: RewardRef, w: tuple[float, ...]) -> float:
-    """DeepMimic / ScaDiver-style imitation reward in [0, 1] for fighter 0 of ``env`` at its step:
+def tracking_reward(env, rr: RewardRef, w: tuple[float, ...], k: int = 0) -> float:
+    """DeepMimic / ScaDiver-style imitation reward in [0, 1] for fighter k of ``env`` at its step:
     pose (joint rotation error), joint velocity, end effectors relative to the pelvis in the facing
     frame (so a drifted but balanced body is not scored as lost: the reference's feet slide, the
     simulated ones stick), root (height, tilt, heading and a mild drift term), centre-of-mass velocity."""
     import mujoco
 
     from .env import _heading
-    c = env._cache[0]
+    c = env._cache[k]
     d = env.data
-    r = env.refs[0]
+    r = env.refs[k]
     t = env.t
     q = d.qpos[c.qpos]
     base = c.qpos.start

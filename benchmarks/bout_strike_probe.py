@@ -64,7 +64,13 @@ def pair(a_files: str, b_files: str) -> dict:
     from math import comb
 
     def rows(files):
-        return {r["trial"]: r for f in files.split(",") for r in json.loads(Path(f).read_text())["rows"]}
+        out = {}
+        for f in files.split(","):
+            try:
+                out.update({r["trial"]: r for r in json.loads(Path(f).read_text())["rows"]})
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise SystemExit(f"{f}: not a result of this probe ({type(e).__name__}: {e})") from None
+        return out
     A, B = rows(a_files), rows(b_files)
     both = sorted(set(A) & set(B))
     out = {"trials": len(both)}

@@ -44,7 +44,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
-from .judging import fist_gap
+from .judging import fist_gap, target_geometry
 from .model import EFFECTOR_LABELS, TARGET_LABELS
 from .search_controller import SearchController, SearchSettings
 
@@ -122,22 +122,17 @@ class BoutSearchTracker:
             sc = SearchController(self.policy, replace(self.s, seed=self.s.seed + k))
             sc.reset(solos[k])
             self.searchers.append(sc)
-        # fist geoms of each one-fighter copy (per side) and target geoms of each bout fighter
-        lab = solos[0].scene.fighters[0].geom_label
-        self._fists = [np.concatenate([lab[e] for e in EFFECTOR_LABELS])] + [np.asarray(lab[e]) for e in EFFECTOR_LABELS]
-        self._fist_r = [solos[0].model.geom_size[g, 0].copy() for g in self._fists]
+        # per bout (and duel) fighter: fist geoms (both, left, right) and target geoms; a one-fighter
+        # copy has fighter 0's geom ids (the same body)
         from .imitation import leg_mask
         self._legs = leg_mask(solos[0].scene)
-        self._bout_fists = []                   # the same per fighter of the bout (and duel) scene
-        for fm in env.scene.fighters:
-            gl = fm.geom_label
-            self._bout_fists.append([np.concatenate([gl[e] for e in EFFECTOR_LABELS])] + [np.asarray(gl[e]) for e in EFFECTOR_LABELS])
-        cap = mujoco.mjtGeom.mjGEOM_CAPSULE
-        self._targets = []
-        for fm in env.scene.fighters:
-            g = np.concatenate([fm.geom_label[t] for t in TARGET_LABELS])
-            self._targets.append((g, env.model.geom_size[g, 0].copy(),
-                                  np.where(env.model.geom_type[g] == cap, env.model.geom_size[g, 1], 0.0)))
+        self._fists = [[np.concatenate([fm.geom_label[e] for e in EFFECTOR_LABELS])]
+                       + [np.asarray(fm.geom_label[e]) for e in EFFECTOR_LABELS] for fm in env.scene.fighters]
+        self._fist_r = [env.model.geom_size[g, 0].copy() for g in self._fists[0]]
+        self._targets = [target_geometry(env.model, np.concatenate([fm.geom_label[t] for t in TARGET_LABELS]))
+                         for fm in env.scene.fighters]
+        self._solo_fists = [np.asarray(solos[0].scene.fighters[0].geom_label[e]) for e in EFFECTOR_LABELS]
+        self._solo_fists.insert(0, np.concatenate(self._solo_fists))
         if self._duel is not None:
             self._duel.refs = env.refs
             self.policy.reset(self._duel)
@@ -199,37 +194,33 @@ class BoutSearchTracker:
             return None
         o = 1 - k
         g, tr, thl = self._targets[o]
-        c0 = env.data.geom_xpos[g].copy()
-        ax = env.data.geom_xmat[g][:, [2, 5, 8]].copy()
-        ref_o = self.refs[o]
-        base = ref_o.qpos[env.t, :2].copy()
-        shift = np.zeros(3)
-        sd = self._solos[k].data
         w, inv_s2 = self.aim, 1.0 / self.aim_sigma_m ** 2
-        if self._duel is not None:
-            dd = self._duel.data
-            fists = self._bout_fists[k]
+        if self._duel is not None:                  # the opponent's geoms as simulated
+            d = self._duel.data
+            fists = self._fists[k]
 
-            def extra_duel(du) -> float:
-                tau = du.t
-                r = 0.0
-                for a, b, side in wins:
-                    if a <= tau < b:
-                        fg = fists[side + 1]
-                        gap = fist_gap(dd.geom_xpos[fg], self._fist_r[side + 1], dd.geom_xpos[g],
-                                       dd.geom_xmat[g][:, [2, 5, 8]], tr, thl)
-                        r += w * float(np.exp(-gap * gap * inv_s2))
-                return r
-            return extra_duel
+            def targets(tau: int):
+                return d.geom_xpos[g], d.geom_xmat[g][:, [2, 5, 8]]
+        else:                                       # held, moved on by the opponent's reference
+            d = self._solos[k].data
+            fists = self._solo_fists
+            c0 = env.data.geom_xpos[g].copy()
+            ax = env.data.geom_xmat[g][:, [2, 5, 8]].copy()
+            ref_o = self.refs[o]
+            base = ref_o.qpos[env.t, :2].copy()
+            shift = np.zeros(3)
 
-        def extra(solo) -> float:
-            tau = solo.t
+            def targets(tau: int):
+                shift[:2] = ref_o.qpos[min(tau, ref_o.n_frames - 1), :2] - base
+                return c0 + shift, ax
+
+        def extra(rollout_env) -> float:
+            tau = rollout_env.t
             r = 0.0
             for a, b, side in wins:
                 if a <= tau < b:
-                    shift[:2] = ref_o.qpos[min(tau, ref_o.n_frames - 1), :2] - base
-                    fg = self._fists[side + 1]
-                    gap = fist_gap(sd.geom_xpos[fg], self._fist_r[side + 1], c0 + shift, ax, tr, thl)
+                    xyz, axis = targets(tau)
+                    gap = fist_gap(d.geom_xpos[fists[side + 1]], self._fist_r[side + 1], xyz, axis, tr, thl)
                     r += w * float(np.exp(-gap * gap * inv_s2))
             return r
         return extra

@@ -48,9 +48,7 @@ class HitJudge:
         self._fist_geo = [(g, model.geom_size[g, 0].copy()) for g in self.fist_geoms]
         self._side_geo = [[(g[self.fist_side[g] == sd], model.geom_size[g[self.fist_side[g] == sd], 0].copy())
                            for sd in (0, 1)] for g in self.fist_geoms]
-        cap = mujoco.mjtGeom.mjGEOM_CAPSULE
-        self._target_geo = [(g, model.geom_size[g, 0].copy(), np.where(model.geom_type[g] == cap, model.geom_size[g, 1], 0.0))
-                            for g in self.target_geoms]
+        self._target_geo = [target_geometry(model, g) for g in self.target_geoms]
         # strike effector joint -> fist side (0 left, 1 right, -1 other)
         parts = library.parts
         side_of = {parts.get("l_fist", -9): 0, parts.get("l_wrist", -9): 0, parts.get("r_fist", -9): 1,
@@ -164,6 +162,12 @@ class HitJudge:
         fg, fr = self._fist_geo[a] if side < 0 else self._side_geo[a][side]
         tg, tr, thl = self._target_geo[b]
         return fist_gap(d.geom_xpos[fg], fr, d.geom_xpos[tg], d.geom_xmat[tg][:, [2, 5, 8]], tr, thl)
+
+
+def target_geometry(model: mujoco.MjModel, geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(geom ids, radii, half-lengths: 0 for a sphere) of target geoms, as fist_gap takes them."""
+    cap = mujoco.mjtGeom.mjGEOM_CAPSULE
+    return geoms, model.geom_size[geoms, 0].copy(), np.where(model.geom_type[geoms] == cap, model.geom_size[geoms, 1], 0.0)
 
 
 def fist_gap(fist_xyz: np.ndarray, fist_r: np.ndarray, tgt_xyz: np.ndarray, tgt_axis: np.ndarray,

@@ -37,11 +37,10 @@ def main() -> None:
 
     graph = None
     if args.graph:
-        from igraph_fight.evaluate import _sim_params
         from igraph_fight.graph import load_graph
         graph = load_graph(args.graph)
         lib = graph.load_library()
-        game = FightGame(lib, GameConfig(sim=_sim_params(graph)))
+        game = FightGame(lib, GameConfig(sim=graph.sim_params()))
     else:
         from motion_graph.library import build_library
         from motion_graph.paths import find_mocap_root

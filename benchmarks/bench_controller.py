@@ -75,12 +75,10 @@ def record_observations(graph, lib, bouts: int, seconds: float):
     from igraph_fight.controller import NPCController, observe
     from igraph_fight.game import FightGame, GameConfig
     from igraph_fight.match import run_bout
-    from igraph_fight.sim import SimParams
 
     ca = NPCController(graph, lib, style="infighter", depth=5)
     cb = NPCController(graph, lib, style="outboxer", depth=5)
-    sim_opts = graph.header.get("options", {}).get("sim")
-    game = FightGame(lib, GameConfig(max_seconds=seconds, sim=SimParams(**sim_opts) if sim_opts else SimParams()),
+    game = FightGame(lib, GameConfig(max_seconds=seconds, sim=graph.sim_params()),
                      tables=ca.tables)
     obs = []
 

@@ -34,12 +34,10 @@ def main(argv=None) -> int:
     ap.add_argument("--decisions-out", default="", help="write the bout's decisions here (JSON)")
     a = ap.parse_args(argv)
     from igraph_fight.graph import load_graph
-    from igraph_fight.sim import SimParams
     from tracker.bout import BoutConfig, BoutSetup, PhysicsBout, load_tracker, make_agent
     g = load_graph(a.graph)
     lib = g.load_library()
-    so = g.header.get("options", {}).get("sim")
-    setup = BoutSetup.create(lib, sim_params=SimParams(**so) if so else None, root_assist=a.assist)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=a.assist)
     bout = PhysicsBout(setup, [make_agent("infighter+phys", g, lib, 5), make_agent("outboxer+phys", g, lib, 5)],
                        load_tracker(a.tracker), BoutConfig(seconds=a.seconds))
     w0 = time.perf_counter()

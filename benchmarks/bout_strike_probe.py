@@ -27,34 +27,87 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 
-def draw_trial(setup, bout_of, screen_of, strike_actions: list[int], i: int, seed: int):
-    """A started bout (``bout_of(action)``) whose first action of A is a punch with a planned hit
-    (trial i), and the step after which its last strike window has passed; None when 40 draws planned
-    none. The kinematic simulator predicts hits only up to the next decision instant (B's short
-    guards end after 10-31 frames), so a draw is screened by playing it under ``screen_of(action)``
-    (the plain policy: cheap) until the punch's windows have passed."""
+def draws(i: int, seed: int, n: int = 40):
+    """Trial i's candidate starts: (distance m, heading error rad, bout seed), n of them."""
+    rng = np.random.default_rng([seed, i])
+    for _ in range(n):
+        d = rng.uniform(0.5, 1.3)
+        h = rng.uniform(-0.2, 0.2)
+        yield d, h, int(rng.integers(1 << 30))
+
+
+def screen(setup, screen_of, a: int, d: float, h: float, bseed: int):
+    """Play punch a from the start (d, h) under ``screen_of(a)`` (the plain policy: cheap) until its
+    last strike window has passed. Returns (planned hits of the punch, the start, the end step);
+    None when no guard of the library leads to a."""
     lib = setup.library
-    a = strike_actions[i % len(strike_actions)]
     guards = [g for g in range(lib.n_actions) if a in set(int(x) for x in lib.next(g))]
     if not guards:
         return None
     s0, s1 = int(lib.strike_offsets[a]), int(lib.strike_offsets[a + 1])
-    rng = np.random.default_rng([seed, i])
-    for _ in range(40):
-        d = rng.uniform(0.5, 1.3)
-        h = rng.uniform(-0.2, 0.2)
-        bseed = int(rng.integers(1 << 30))
-        init = setup.game.initial_state((0.0, 0.0), (0.0, d), (h, np.pi), (guards[0], int(setup.game.start_actions[0])))
-        screen = screen_of(a)
-        screen.start(seed=bseed, initial=init)
-        end = int(lib.strike_w1[s0:s1].max()) + screen.config.window_slack[1] + 1
-        while screen.env.t < end:
-            screen.step()
-        if any(p["attacker"] == 0 and p["inst"] == 1 for p in screen.planned_events):
+    init = setup.game.initial_state((0.0, 0.0), (0.0, d), (h, np.pi), (guards[0], int(setup.game.start_actions[0])))
+    bout = screen_of(a)
+    bout.start(seed=bseed, initial=init)
+    end = int(lib.strike_w1[s0:s1].max()) + bout.config.window_slack[1] + 1
+    while bout.env.t < end:
+        bout.step()
+    return sum(p["attacker"] == 0 and p["inst"] == 1 for p in bout.planned_events), init, end
+
+
+def draw_trial(setup, bout_of, screen_of, strike_actions: list[int], i: int, seed: int):
+    """A started bout (``bout_of(action)``) whose first action of A is a punch with a planned hit
+    (trial i), and the step after which its last strike window has passed; None when 40 draws planned
+    none. The kinematic simulator predicts hits only up to the next decision instant (B's short
+    guards end after 10-31 frames), so a draw is screened by playing it (``screen``) until the
+    punch's windows have passed."""
+    a = strike_actions[i % len(strike_actions)]
+    for d, h, bseed in draws(i, seed):
+        got = screen(setup, screen_of, a, d, h, bseed)
+        if got is None:
+            return None
+        if got[0] > 0:
             bout = bout_of(a)
-            bout.start(seed=bseed, initial=init)
-            return bout, a, d, h, end
+            bout.start(seed=bseed, initial=got[1])
+            return bout, a, d, h, got[2]
     return None
+
+
+def load_rows(files: str) -> dict[int, dict]:
+    """Trial -> row of earlier runs (comma-separated --out files of this probe)."""
+    out = {}
+    for f in files.split(","):
+        try:
+            out.update({r["trial"]: r for r in json.loads(Path(f).read_text())["rows"]})
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise SystemExit(f"{f}: not a result of this probe ({type(e).__name__}: {e})") from None
+    return out
+
+
+def rescreen(setup, screen_of, files: str, seed: int) -> dict:
+    """The trials of earlier runs (comma-separated --out files of this probe, made with another
+    simulator model) screened again under ``setup``'s simulator: for each trial the draw it used,
+    whether this model plans a hit of it, and how that splits the trials that landed physically."""
+    out_rows = []
+    for i, r in sorted(load_rows(files).items()):
+        if r["planned"] == 0:
+            continue
+        for d, h, bseed in draws(i, seed):
+            if round(d, 3) == r["distance_m"] and round(h, 3) == r["heading_rad"]:
+                n = screen(setup, screen_of, int(r["action"]), d, h, bseed)[0]
+                out_rows.append({"trial": i, "planned_before": r["planned"], "realised": r["realised"], "planned_now": n})
+                print(f"trial {i}: planned {r['planned']} -> {n}, realised {r['realised']}", flush=True)
+                break
+        else:
+            print(f"trial {i}: its draw is not among seed {seed}'s (another --seed?)", flush=True)
+
+    def split(keep):
+        sel = [x for x in out_rows if keep(x)]
+        P = sum(x["planned_before"] for x in sel)
+        R = sum(x["realised"] for x in sel)
+        return {"trials": len(sel), "planned": P, "realised": R, "ratio": R / P if P else None,
+                "trials_landed": sum(x["realised"] > 0 for x in sel)}
+    return {"files": files, "still_planned": split(lambda x: x["planned_now"] > 0),
+            "no_longer_planned": split(lambda x: x["planned_now"] == 0), "rows": out_rows}
 
 
 def pair(a_files: str, b_files: str) -> dict:
@@ -63,15 +116,7 @@ def pair(a_files: str, b_files: str) -> dict:
     two-sided sign test on those."""
     from math import comb
 
-    def rows(files):
-        out = {}
-        for f in files.split(","):
-            try:
-                out.update({r["trial"]: r for r in json.loads(Path(f).read_text())["rows"]})
-            except (OSError, ValueError, KeyError, TypeError) as e:
-                raise SystemExit(f"{f}: not a result of this probe ({type(e).__name__}: {e})") from None
-        return out
-    A, B = rows(a_files), rows(b_files)
+    A, B = load_rows(a_files), load_rows(b_files)
     both = sorted(set(A) & set(B))
     out = {"trials": len(both)}
     for name, d in (("a", A), ("b", B)):
@@ -103,12 +148,23 @@ def main(argv=None) -> int:
     ap.add_argument("--first", type=int, default=0, help="first trial index (to split a run)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="")
+    ap.add_argument("--rescreen", default="", metavar="F1[,F2]",
+                    help="screen the trials of these results again under --graph's simulator (no bouts)")
+    ap.add_argument("--sim", default="", metavar="K=V[,K=V]",
+                    help="override the graph's simulator options, e.g. guard_radius_m=0.05,guard_lead_s=0")
     a = ap.parse_args(argv)
     from igraph_fight.graph import load_graph
     from tracker.bout import BoutConfig, BoutSetup, MenuAgent, PhysicsBout, load_tracker
     g = load_graph(a.graph)
     lib = g.load_library()
-    setup = BoutSetup.create(lib)
+    sp = g.sim_params()
+    if a.sim:
+        from dataclasses import replace
+        try:
+            sp = replace(sp, **{k: float(v) for k, v in (kv.split("=") for kv in a.sim.split(","))})
+        except (TypeError, ValueError) as e:
+            raise SystemExit(f"--sim {a.sim}: {e}") from None
+    setup = BoutSetup.create(lib, sim_params=sp)
     trk = load_tracker(a.tracker)
     strike_actions = [x for x in range(lib.n_actions) if lib.strike_offsets[x + 1] > lib.strike_offsets[x]]
     calm = [x for x in range(lib.n_actions) if lib.labels[x] == "guard"]
@@ -118,6 +174,14 @@ def main(argv=None) -> int:
 
     def bout_of(action: int, tracker=trk) -> PhysicsBout:
         return PhysicsBout(setup, [MenuAgent([action], "puncher"), MenuAgent(calm, "target")], tracker, cfg)
+
+    if a.rescreen:
+        out = rescreen(setup, lambda act: bout_of(act, plain), a.rescreen, a.seed)
+        print(json.dumps({k: v for k, v in out.items() if k != "rows"}, indent=1))
+        if a.out:
+            from motion_graph.atomic import atomic_write_text
+            atomic_write_text(Path(a.out), json.dumps(out, indent=1))
+        return 0
 
     rows = []
     t_wall = time.perf_counter()

@@ -59,7 +59,6 @@ def main(argv=None) -> int:
     from igraph_fight.controller import NPCController
     from igraph_fight.game import FightGame, GameConfig
     from igraph_fight.graph import load_graph
-    from igraph_fight.sim import SimParams
 
     t_all = time.perf_counter()
     graph = load_graph(args.graph)
@@ -73,8 +72,7 @@ def main(argv=None) -> int:
     print(f"graph {args.graph}: {graph.n_states} states, {graph.n_edges} edges; midpoint features simulated in "
           f"{time.perf_counter() - t:.1f} s (re-simulated vs stored: max |feat_r diff| "
           f"{chk['max_abs_r_diff_m']:.2g} m, max |duration diff| {chk['max_abs_duration_diff_s']:.2g} s)")
-    sim_opts = graph.header.get("options", {}).get("sim")
-    game = FightGame(lib, GameConfig(max_seconds=args.seconds, sim=SimParams(**sim_opts) if sim_opts else SimParams()),
+    game = FightGame(lib, GameConfig(max_seconds=args.seconds, sim=graph.sim_params()),
                      tables=ctrl.tables)
     seeds = list(range(args.seed, args.seed + args.bouts))
     # random pairs: one set of bouts from the same start states, measured against every direction

@@ -76,14 +76,11 @@ class SwapSetup:
     def __init__(self, graph, lib, opponent: str = "infighter", depth: int = 5, seconds: float = 60.0) -> None:
         from igraph_fight.controller import NPCController
         from igraph_fight.game import FightGame, GameConfig
-        from igraph_fight.sim import SimParams
 
         self.graph, self.lib = graph, lib
         self.a = NPCController(graph, lib, style="balanced", depth=depth)
         self.b = NPCController(graph, lib, style=opponent, depth=depth)
-        sim_opts = graph.header.get("options", {}).get("sim")
-        params = SimParams(**sim_opts) if sim_opts else SimParams()
-        self.game = FightGame(lib, GameConfig(max_seconds=seconds, sim=params), tables=self.a.tables)
+        self.game = FightGame(lib, GameConfig(max_seconds=seconds, sim=graph.sim_params()), tables=self.a.tables)
         self.seconds = seconds
         self.swap_ms: list[float] = []
 

@@ -28,9 +28,7 @@ def run_style_bout(graph_path: str | Path, style_a: str, style_b: str, depth_a: 
     lib = library if library is not None else graph.load_library()
     ca = NPCController(graph, lib, style=style_a, depth=depth_a, first_ply=first_ply_a)
     cb = NPCController(graph, lib, style=style_b, depth=depth_b, first_ply=first_ply_b)
-    sim_opts = graph.header.get("options", {}).get("sim")
-    from .sim import SimParams
-    game = FightGame(lib, GameConfig(max_seconds=seconds, sim=SimParams(**sim_opts) if sim_opts else SimParams()),
+    game = FightGame(lib, GameConfig(max_seconds=seconds, sim=graph.sim_params()),
                      tables=ca.tables)
     tag = {"table": "", "exact": "+exact", "exact2": "+exact2"}
     a = IGAgent(ca, f"{ca.style}({depth_a}){tag[first_ply_a]}")

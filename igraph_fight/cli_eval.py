@@ -79,12 +79,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_train_rl(args: argparse.Namespace) -> int:
     from .game import FightGame, GameConfig
     from .graph import load_graph
-    from .evaluate import _sim_params
     from .rl_train import RLConfig, train
 
     g = load_graph(args.graph)
     lib = g.load_library()
-    game = FightGame(lib, GameConfig(sim=_sim_params(g)))
+    game = FightGame(lib, GameConfig(sim=g.sim_params()))
     cfg = RLConfig(style=args.style, total_decisions=args.decisions, max_cpu_minutes=args.minutes, seed=args.seed,
                    init_from=args.init_from)
     ck = train(game, cfg, out=args.out, progress=not args.json)

@@ -60,6 +60,8 @@ def register(sub) -> None:
     p.add_argument("--next-threshold", type=float, default=None,
                    help="with --mocap: Next(a) pose threshold of the library (m, default 0.20)")
     p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
+    p.add_argument("--guard", type=float, default=None, metavar="RADIUS_M",
+                   help="block strikes at the other's forearms (capsules of this radius, e.g. 0.05; default: no guard)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler's initial states (default 0)")
     p.add_argument("--workers", type=int, default=1, help="threads (0: all cores); the result does not depend on it")
     p.add_argument("--checkpoint", default=None, help="checkpoint folder (default OUT.ckpt)")
@@ -85,6 +87,7 @@ def _options(args: argparse.Namespace):
     import dataclasses
 
     from .build import BuildOptions
+    from .sim import SimParams
 
     kw = {}
     if args.max_samples is not None:
@@ -110,6 +113,8 @@ def _options(args: argparse.Namespace):
         kw["initial_facing_share"], kw["initial_facing_deg"] = float(args.initial_facing[0]), float(args.initial_facing[1])
     if args.no_prune:
         kw["prune_dead_ends"] = False
+    if getattr(args, "guard", None) is not None:
+        kw["sim"] = SimParams(guard_radius_m=args.guard)
     opts = dataclasses.replace(BuildOptions(), **kw)
     opts.validate()
     return opts

@@ -780,9 +780,8 @@ class NPCController:
         self._menu_off = np.asarray(library.next_offsets, dtype=np.int64)
         self._menu_ids = np.asarray(library.next_ids, dtype=np.int64)
         self._search_graph = SearchGraph.from_arrays(a["state_offsets"], a["edge_target"], a["edge_swap"])
-        from .sim import SimParams, SimTables
-        sim_opts = graph.header.get("options", {}).get("sim")
-        self.tables = SimTables.from_library(library, SimParams(**sim_opts) if sim_opts else SimParams())
+        from .sim import SimTables
+        self.tables = SimTables.from_library(library, graph.sim_params())
         self._T = self.tables.kernel_tuple()
         self._kinds = np.asarray(self.tables.kinds, dtype=np.int64)
         self._kinds32 = self._kinds.astype(np.int32)

@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from .controller import NPCController
-from .sim import _open_mask, _relative, _root, _start_from_root, wrap
+from .sim import _blocked, _open_mask, _relative, _root, _start_from_root, wrap
 
 
 @dataclass
@@ -161,7 +161,8 @@ def _frame(T, S, act, frm, mask, opp, team, hits, defended, pose):
     """Advance every fighter one frame; push overlapping bodies apart; judge every active strike
     against the attacker's opponent (sim._advance's rules). Fills ``pose``; returns the
     deciders' count (fighters now at the last frame of their action)."""
-    n_frames, offs, path, eff, tgt, s_off, s_eff, s_w0, s_w1, s_dmg, d_w0, d_w1, rad2, dmin, max_frames, near2 = T
+    (n_frames, offs, path, eff, tgt, s_off, s_eff, s_w0, s_w1, s_dmg, d_w0, d_w1, rad2, dmin, max_frames, near2,
+     arms, guard2, lead) = T
     n = S.shape[0]
     nt = tgt.shape[1]
     for i in range(n):
@@ -210,9 +211,17 @@ def _frame(T, S, act, frm, mask, opp, team, hits, defended, pose):
         go = offs[act[o]] + frm[o]
         for k in range(s_off[a], s_off[a + 1]):
             bit = np.int64(1) << np.int64(k - s_off[a])
-            if f < s_w0[k] or f >= s_w1[k] or (mask[i] & bit) != 0:
+            if f < s_w0[k] - lead or f >= s_w1[k] or (mask[i] & bit) != 0:
                 continue
             e = eff[offs[a] + f, s_eff[k]]
+            if guard2 > 0.0:
+                e0 = eff[offs[a] + f - 1, s_eff[k]] if f > 0 else e
+                if _blocked(arms, guard2, e0, e, ci, si, S[i, 0], S[i, 1], go, co, so, S[o, 0], S[o, 1]):
+                    mask[i] |= bit    # a forearm of the opponent blocks it (sim._advance's guard)
+                    defended[o] += 1
+                    continue
+            if f < s_w0[k]:
+                continue
             ex = ci * e[0] + si * e[2] + S[i, 0]
             ey = e[1]
             ez = -si * e[0] + ci * e[2] + S[i, 1]

@@ -109,12 +109,6 @@ class EvalConfig:
 _CTX: dict | None = None
 
 
-def _sim_params(graph):
-    from .sim import SimParams
-    opts = graph.header.get("options", {}).get("sim")
-    return SimParams(**opts) if opts else SimParams()
-
-
 def build_context(cfg: EvalConfig, rl: dict | None = None) -> dict:
     """Graph, library, game, IG controllers (one per depth), static policy, RL checkpoints."""
     from .agents.static import static_policy
@@ -127,7 +121,7 @@ def build_context(cfg: EvalConfig, rl: dict | None = None) -> dict:
     controllers = {d: NPCController(graph, lib, style=cfg.style, depth=d)
                    for d in sorted(set(cfg.depths) | set(cfg.exact2_depths))}
     tables = next(iter(controllers.values())).tables if controllers else None
-    game = FightGame(lib, GameConfig(max_seconds=cfg.seconds, sim=_sim_params(graph)), tables=tables)
+    game = FightGame(lib, GameConfig(max_seconds=cfg.seconds, sim=graph.sim_params()), tables=tables)
     from .agents.gametree import GameTreeSearch
     ctx = {"cfg": cfg, "graph": graph, "lib": lib, "game": game, "controllers": controllers,
            "static": static_policy(game.tables, cfg.style), "rl": rl or {},

@@ -155,6 +155,13 @@ class InteractionGraph:
         """Edge features (decider's perspective), keyed without the ``feat_`` prefix."""
         return {k[5:]: v for k, v in self.arrays.items() if k.startswith("feat_")}
 
+    def sim_params(self):
+        """The kinematic simulator's options the graph was built with (a SimParams; the defaults
+        for files that do not record them)."""
+        from .sim import SimParams
+        opts = self.header.get("options", {}).get("sim")
+        return SimParams(**opts) if opts else SimParams()
+
     def load_library(self):
         """The action library the graph was built from (embedded in the graph file)."""
         if "library_npz" not in self.arrays:

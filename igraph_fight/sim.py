@@ -20,6 +20,14 @@ its action (a decision instant). On every frame:
   Each strike resolves at most once (a bit in the attacker's ``mask``). For the sampler's
   interaction count J the event also counts strikes whose effector came within
   ``reach_margin_m`` of a target ("attacks in the reaching distance"), once per strike and event.
+* the guard (optional, ``SimParams.guard_radius_m`` > 0; off by default): from ``guard_lead_s``
+  before a strike's window to its end, the effector's path (the segment since the last frame,
+  sampled at three points) is tested against the other's forearms (capsules from elbow to fist of
+  ``guard_radius_m``). A strike whose fist meets a forearm before it touches a target resolves as
+  *blocked*: a working defence of the other (counted as avoided), not a hit. Without it a punch
+  passes through the arms that guard the head, which a physical opponent's arms do not allow
+  (tracker/BOUTS.md, sixteenth and seventeenth sessions). An approximation: the forearm is posed
+  at the current frame only, and the fist's path between frames is a straight line.
 
 Avatars are not interrupted by hits: the library has no hit-reaction mocap, so an interruption
 could only cut an action short and start another clip from a mid-motion pose. This is a design
@@ -97,6 +105,9 @@ class SimParams:
     damage: damage per hit by attack kind (name in motion_graph.KINDS -> value); kinds not
         listed deal ``default_damage``.
     max_event_frames: safety bound on one event's length.
+    guard_radius_m: radius of the forearm capsules (elbow to fist) that block strikes; 0 (the
+        default) for no guard, the model of the graphs built before it.
+    guard_lead_s: how long before a strike's window its fist may already be blocked (seconds).
     """
 
     contact_radius_m: float = 0.05
@@ -106,13 +117,24 @@ class SimParams:
     default_damage: float = 1.0
     damage: dict = field(default_factory=dict)
     max_event_frames: int = 100_000
+    guard_radius_m: float = 0.0
+    guard_lead_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.guard_radius_m < 0 or self.guard_lead_s < 0:
+            raise ValueError(f"guard_radius_m and guard_lead_s must be >= 0, not {self.guard_radius_m} and "
+                             f"{self.guard_lead_s}")
 
     def to_json(self) -> dict:
-        return {"contact_radius_m": self.contact_radius_m, "target_radius_m": dict(sorted(self.target_radius_m.items())),
-                "reach_margin_m": self.reach_margin_m,
-                "min_distance_m": self.min_distance_m,
-                "default_damage": self.default_damage, "damage": dict(sorted(self.damage.items())),
-                "max_event_frames": self.max_event_frames}
+        d = {"contact_radius_m": self.contact_radius_m, "target_radius_m": dict(sorted(self.target_radius_m.items())),
+             "reach_margin_m": self.reach_margin_m,
+             "min_distance_m": self.min_distance_m,
+             "default_damage": self.default_damage, "damage": dict(sorted(self.damage.items())),
+             "max_event_frames": self.max_event_frames}
+        if self.guard_radius_m > 0:  # graphs without a guard keep the header they always had
+            d["guard_radius_m"] = self.guard_radius_m
+            d["guard_lead_s"] = self.guard_lead_s
+        return d
 
 
 @dataclass
@@ -121,7 +143,8 @@ class SimTables:
 
     n_frames (A,) frames per action; frame_offsets (A+1,); path (F, 3) pelvis ground x, z (m) and
     fighting heading (rad); eff (F, E, 3) effector joints used by strikes; tgt (F, T, 3) target
-    points (head centre, chest, belly); strike tables (S,) with strike_eff an index into eff;
+    points (head centre, chest, belly); arms (F, 4, 3) left elbow, left fist, right elbow, right
+    fist (the guard's forearms); strike tables (S,) with strike_eff an index into eff;
     defence windows (A,); kinds (A,); next_offsets/next_ids (menus); nextset (A,) id of the
     action's Next-set (actions with the same Next(a) share it); fps; params.
     """
@@ -145,6 +168,7 @@ class SimTables:
     fps: float
     params: SimParams
     target_names: tuple = ()
+    arms: np.ndarray | None = None
 
     @classmethod
     def from_library(cls, lib, params: SimParams = SimParams()) -> "SimTables":
@@ -170,6 +194,12 @@ class SimTables:
         if not tg:
             raise ValueError("the library's skeleton has no head/chest/belly part to hit")
         tgt = np.ascontiguousarray(np.stack(tg, axis=1))
+        arm_parts = ("l_elbow", "l_fist", "r_elbow", "r_fist")
+        if params.guard_radius_m > 0 and any(n not in parts for n in arm_parts):
+            missing = [n for n in arm_parts if n not in parts]
+            raise ValueError(f"a guard needs the forearms, and the library's skeleton has no {', '.join(missing)}")
+        arms = np.ascontiguousarray(P[:, [parts[n] for n in arm_parts]] if all(n in parts for n in arm_parts)
+                                    else np.zeros((len(P), 4, 3)))
         kinds = np.asarray(lib.strike_kind, dtype=np.int64)
         dmg = np.array([params.damage.get(KINDS[k], params.default_damage) for k in kinds], dtype=np.float64)
         # Next-set ids: equal menus share an id (first action with that menu order).
@@ -193,7 +223,7 @@ class SimTables:
             kinds=np.asarray(lib.kinds, dtype=np.int64),
             next_offsets=np.asarray(lib.next_offsets, dtype=np.int64),
             next_ids=np.asarray(lib.next_ids, dtype=np.int64),
-            nextset=nextset, fps=float(lib.fps), params=params, target_names=tuple(names),
+            nextset=nextset, fps=float(lib.fps), params=params, target_names=tuple(names), arms=arms,
         )
 
     @property
@@ -211,12 +241,17 @@ class SimTables:
                          for n in self.target_names], dtype=np.float64)
 
     def kernel_tuple(self) -> tuple:
-        """The tables as the tuple every kernel takes (see ``_unpack``)."""
+        """The tables as the tuple every kernel takes (unpacked at the top of ``_advance``); the
+        guard's last three: arms, squared block distance (0: no guard), lead (frames)."""
         p = self.params
+        arms = self.arms if self.arms is not None else np.zeros((len(self.path), 4, 3))
+        guard2 = (p.contact_radius_m + p.guard_radius_m) ** 2 if p.guard_radius_m > 0 else 0.0
+        lead = int(round(p.guard_lead_s * self.fps)) if p.guard_radius_m > 0 else 0
         return (self.n_frames, self.frame_offsets, self.path, self.eff, self.tgt, self.strike_offsets,
                 self.strike_eff, self.strike_w0, self.strike_w1, self.strike_damage, self.defence_w0,
                 self.defence_w1, self.contact_radius2(), float(p.min_distance_m),
-                int(p.max_event_frames), float(max(p.reach_margin_m, float(np.sqrt(self.contact_radius2().max())))) ** 2)
+                int(p.max_event_frames), float(max(p.reach_margin_m, float(np.sqrt(self.contact_radius2().max())))) ** 2,
+                arms, float(guard2), lead)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -228,6 +263,47 @@ def wrap(a: float) -> float:
     return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
 
 
+@njit(cache=True, inline="always")
+def _seg_point_d2(px, py, pz, ax, ay, az, bx, by, bz):
+    """Squared distance from point p to segment ab (m^2)."""
+    ux = bx - ax
+    uy = by - ay
+    uz = bz - az
+    wx = px - ax
+    wy = py - ay
+    wz = pz - az
+    uu = ux * ux + uy * uy + uz * uz
+    t = 0.0
+    if uu > 1e-12:
+        t = min(1.0, max(0.0, (wx * ux + wy * uy + wz * uz) / uu))
+    dx = wx - t * ux
+    dy = wy - t * uy
+    dz = wz - t * uz
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, inline="always")
+def _blocked(arms, guard2, e0, e1, c, s, sx, sz, go, co, so, ox, oz):
+    """Whether the effector's path from e0 to e1 (action-frame points of the attacker, placed by
+    cos/sin c, s and offset sx, sz) meets a forearm of the other's frame go (placed by co, so, ox,
+    oz) within sqrt(guard2); the path is sampled at a third, two thirds and its end."""
+    for j in range(1, 4):
+        w = j / 3.0
+        lx = e0[0] + w * (e1[0] - e0[0])
+        ly = e0[1] + w * (e1[1] - e0[1])
+        lz = e0[2] + w * (e1[2] - e0[2])
+        ex = c * lx + s * lz + sx
+        ez = -s * lx + c * lz + sz
+        for side in range(2):
+            a = arms[go, 2 * side]
+            b = arms[go, 2 * side + 1]
+            d2 = _seg_point_d2(ex, ly, ez, co * a[0] + so * a[2] + ox, a[1], -so * a[0] + co * a[2] + oz,
+                               co * b[0] + so * b[2] + ox, b[1], -so * b[0] + co * b[2] + oz)
+            if d2 < guard2:
+                return True
+    return False
+
+
 @njit(cache=True)
 def _advance(T, S, act, frm, mask, stats):
     """Advance both avatars to the next decision instant (in place).
@@ -235,7 +311,8 @@ def _advance(T, S, act, frm, mask, stats):
     S (2, 3) start transforms (x, z, heading), act (2,), frm (2,), mask (2,) int64.
     stats (N_STAT,) accumulates. Stops at once when an avatar already stands at its last frame.
     """
-    n_frames, offs, path, eff, tgt, s_off, s_eff, s_w0, s_w1, s_dmg, d_w0, d_w1, rad2, dmin, max_frames, near2 = T
+    (n_frames, offs, path, eff, tgt, s_off, s_eff, s_w0, s_w1, s_dmg, d_w0, d_w1, rad2, dmin, max_frames, near2,
+     arms, guard2, lead) = T
     nt = tgt.shape[1]
     near0 = np.int64(0)  # strikes already counted as near in this event (per avatar)
     near1 = np.int64(0)
@@ -282,16 +359,25 @@ def _advance(T, S, act, frm, mask, stats):
             nearm = near0 if i == 0 else near1
             for k in range(s_off[a], s_off[a + 1]):
                 bit = np.int64(1) << np.int64(k - s_off[a])
-                if f < s_w0[k] or f >= s_w1[k]:
+                if f < s_w0[k] - lead or f >= s_w1[k]:
                     continue
                 resolved = (mask[i] & bit) != 0
+                e = eff[offs[a] + f, s_eff[k]]
+                go = offs[act[o]] + frm[o]
+                if guard2 > 0.0 and not resolved:
+                    e0 = eff[offs[a] + f - 1, s_eff[k]] if f > 0 else e
+                    if _blocked(arms, guard2, e0, e, c[i], s[i], S[i, 0], S[i, 1], go, c[o], s[o], S[o, 0], S[o, 1]):
+                        mask[i] |= bit     # the fist meets a forearm first: a working defence of the other
+                        resolved = True
+                        stats[ST_REACH0 + i] += 1.0
+                        stats[ST_DEF0 + o] += 1.0
+                if f < s_w0[k]:
+                    continue              # (the guard's lead: only blocks before the window)
                 if resolved and (nearm & bit) != 0:
                     continue
-                e = eff[offs[a] + f, s_eff[k]]
                 ex = c[i] * e[0] + s[i] * e[2] + S[i, 0]
                 ey = e[1]
                 ez = -s[i] * e[0] + c[i] * e[2] + S[i, 1]
-                go = offs[act[o]] + frm[o]
                 dbest = np.inf
                 touch = False
                 for t in range(nt):

@@ -154,9 +154,14 @@ def test_aim_and_duel_spec():
     assert (t.aim, t.duel, t.s.candidates) == (2.0, True, 4)
     assert "opponent in the rollouts" in t.describe() and "aimed" in t.describe()
     t = load_tracker("search")
-    assert (t.aim, t.duel) == (0.0, False)
+    assert (t.aim, t.duel, t.touch, t.aiming) == (0.0, False, 0.0, False)
     with pytest.raises(ValueError, match="aim= needs a number"):
         load_tracker("search:aim=x")
+    t = load_tracker("search:touch=10:spread=2")
+    assert (t.aim, t.touch, t.aim_spread, t.aiming) == (0.0, 10.0, 2.0, True)
+    assert "touch 10" in t.describe()
+    with pytest.raises(ValueError, match="touch weight >= 0"):
+        load_tracker("search:touch=-1")
 
 
 @pytest.mark.realdata
@@ -197,13 +202,14 @@ def test_duel_copy_leaves_the_bout_alone_and_reproduces_it_with_fighters_in_cont
 
 @pytest.mark.realdata
 def test_aim_reward_rewards_a_fist_on_the_target(setup):
-    """The aim term of a strike window: about its weight with the fist on the opponent's head, about
-    zero 0.5 m away; none outside the window (duel rollouts: the opponent's live geoms)."""
+    """The aim term of a strike window: about its weight with the fist on the opponent's head (plus
+    the touch weight: the fist on it), about zero 0.5 m away; none outside the window (duel
+    rollouts: the opponent's live geoms)."""
     import mujoco
 
     from tracker.bout_search import BoutSearchTracker
     from tracker.policy import load_policy
-    trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3), aim=2.0, duel=True)
+    trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3), aim=2.0, duel=True, touch=5.0)
     bout = _guard_bout(setup, trk, distance=1.0)
     env = bout.env
     trk.aims = [[(env.t, env.t + 5, 1)], []]
@@ -225,4 +231,4 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
     r.append(f(du))
     du.t += 10
     r.append(f(du))                                       # past the window
-    assert r[1] > 1.9 and r[2] < 0.1 * r[1] and r[3] == 0.0, r
+    assert r[0] < 2.0 and 6.9 < r[1] <= 7.0 and r[2] < 0.1 * r[1] and r[3] == 0.0, r

@@ -24,9 +24,7 @@ def setup(small_graph):
     mf = coop.midpoint_features(graph, ctrl.tables, workers=2)
     feats = dict(graph.arrays)
     feats.update(mf)
-    sim_opts = graph.header.get("options", {}).get("sim")
-    from igraph_fight.sim import SimParams
-    game = FightGame(lib, GameConfig(max_seconds=SECONDS, sim=SimParams(**sim_opts) if sim_opts else SimParams()),
+    game = FightGame(lib, GameConfig(max_seconds=SECONDS, sim=graph.sim_params()),
                      tables=ctrl.tables)
     yield graph, ctrl, mf, feats, game
     ctrl.close()

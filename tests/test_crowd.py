@@ -66,15 +66,18 @@ def test_nearest_enemy_switches_only_when_clearly_closer():
     assert list(opp[1:]) == [0, 0]
 
 
-def test_two_fighter_crowd_frames_reproduce_the_pair_simulator(ctrls):
+@pytest.mark.parametrize("guard_m", [0.0, 0.05])
+def test_two_fighter_crowd_frames_reproduce_the_pair_simulator(ctrls, guard_m):
     """Frame by frame, two fighters that are each other's opponent move, push and hit exactly as
-    the coupled simulator's event (sim.advance_worlds) does."""
+    the coupled simulator's event (sim.advance_worlds) does; with a guard, blocks too."""
     tables = ctrls[0].tables
+    if guard_m:
+        tables = sim.SimTables.from_library(ctrls[0].library, sim.SimParams(guard_radius_m=guard_m))
     T = tables.kernel_tuple()
     lib = ctrls[0].library
     punches = [a for a in range(lib.n_actions) if lib.labels[a] in ("straight", "jab")]
     rng = np.random.default_rng(0)
-    total_hits = 0
+    total_hits = total_blocks = 0
     for trial in range(20):
         a0, a1 = (int(x) for x in rng.choice(punches, 2))
         r = rng.uniform(0.35, 0.9)
@@ -100,7 +103,9 @@ def test_two_fighter_crowd_frames_reproduce_the_pair_simulator(ctrls):
         np.testing.assert_allclose(pose[:, :2], pose_ref[0, :, :2], atol=1e-9)
         np.testing.assert_allclose(np.cos(pose[:, 2] - pose_ref[0, :, 2]), 1.0, atol=1e-12)
         total_hits += hits.sum()
+        total_blocks += dfd.sum()
     assert total_hits > 0  # the comparison covered hits
+    assert total_blocks > 0 if guard_m else total_blocks == 0   # (no punch here has a defence window)
 
 
 def test_snapping_moves_on_graph_deciders_onto_their_state(ctrls):

@@ -286,6 +286,23 @@ def test_cli_build_info_export(lib, tmp_path, capsys):
     assert not ck.exists()
 
 
+def test_cli_build_with_a_guard_records_it_for_every_user_of_the_graph(lib, tmp_path, capsys):
+    from igraph_fight.cli import main
+    from igraph_fight.controller import NPCController
+    from igraph_fight.graph import load_graph
+
+    lib.save(tmp_path / "lib.npz")
+    base = ["build", "--library", str(tmp_path / "lib.npz"), "--max-samples", "2000", "--n-initial", "16",
+            "--seed-bouts", "0", "--quiet"]
+    assert main(base + ["--out", str(tmp_path / "g.igz"), "--guard", "0.05"]) == 0
+    g = load_graph(tmp_path / "g.igz")
+    assert g.sim_params().guard_radius_m == 0.05
+    T = NPCController(g, lib, style="infighter", depth=1).tables.kernel_tuple()
+    assert T[17] == pytest.approx((0.05 + 0.05) ** 2) and T[18] == 6      # 0.2 s lead at 30 fps
+    assert main(base + ["--out", str(tmp_path / "h.igz"), "--guard", "-0.1"]) == 2
+    assert "guard_radius_m" in capsys.readouterr().err
+
+
 def test_spatial_index_agrees_with_brute_force():
     from igraph_fight import spatial
 

@@ -207,6 +207,27 @@ def test_damage_per_kind_and_contact_radius_are_parameters(lib):
     assert np.all(t_big.strike_damage[ks != KINDS.index("straight")] == 1.0)
 
 
+def test_guard_blocks_strikes_and_changes_nothing_else(lib, tables):
+    """With forearms that block (SimParams.guard_radius_m), the same worlds end in the same poses
+    and frames; a strike either hits as without the guard or is blocked (a defence of the other),
+    so hits only drop, strikes that reached a target or a forearm only grow; blocks do happen."""
+    guarded = SimTables.from_library(lib, SimParams(guard_radius_m=0.05))
+    assert guarded.params.to_json()["guard_radius_m"] == 0.05 and "guard_radius_m" not in tables.params.to_json()
+    pose, act, frm, mask = _random_worlds(tables, 3000, seed=5)
+    p0, a0, f0, _, s0 = _run(tables, pose, act, frm, mask)
+    p1, a1, f1, _, s1 = _run(guarded, pose, act, frm, mask)
+    np.testing.assert_array_equal(p0, p1)
+    assert np.array_equal(a0, a1) and np.array_equal(f0, f1)
+    for h, r, d in ((sim.ST_HITS0, sim.ST_REACH0, sim.ST_DEF1), (sim.ST_HITS1, sim.ST_REACH1, sim.ST_DEF0)):
+        assert np.all(s1[:, h] <= s0[:, h]) and np.all(s1[:, r] >= s0[:, r]) and np.all(s1[:, d] >= s0[:, d])
+        assert np.all(s1[:, r] - s1[:, d] == s1[:, h])      # reached = hit, or avoided (dodged or blocked)
+    blocked = (s1[:, sim.ST_DEF0] + s1[:, sim.ST_DEF1]) - (s0[:, sim.ST_DEF0] + s0[:, sim.ST_DEF1])
+    assert (blocked > 0).sum() > 10
+    assert (s0[:, sim.ST_HITS0] > s1[:, sim.ST_HITS0]).sum() > 0    # some of them were hits without the guard
+    with pytest.raises(ValueError, match="guard_radius_m"):
+        SimParams(guard_radius_m=-0.1)
+
+
 def test_bodies_do_not_interpenetrate(tables):
     pose, act, frm, mask = _random_worlds(tables, 2000, seed=4)
     p, _, _, _, st = _run(tables, pose, act, frm, mask)

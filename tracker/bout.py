@@ -185,7 +185,7 @@ class PhysicsBout:
             self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
         if hasattr(self.tracker, "idle"):          # a search tracker skips fallen fighters
             self.tracker.idle = [f.down for f in self.F]
-        if getattr(self.tracker, "aim", 0):        # and may aim the planned strikes
+        if getattr(self.tracker, "aiming", False):   # and may aim the planned strikes
             self.tracker.aims = [self.planned_windows(k, env.t) for k in (0, 1)]
         act = self.tracker.act(env, self._obs)
         for f in self.F:

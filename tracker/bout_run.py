@@ -33,9 +33,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
         from motion_graph.library import load_library
         library = load_library(library)
     lib = library if library is not None else g.load_library()
-    sim_opts = g.header.get("options", {}).get("sim")
-    from igraph_fight.sim import SimParams
-    setup = BoutSetup.create(lib, sim_params=SimParams(**sim_opts) if sim_opts else None, root_assist=root_assist)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
     agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
     cfg = config or BoutConfig(seconds=seconds)
@@ -80,7 +78,7 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     from igraph_fight.graph import load_graph
     g = load_graph(graph) if not hasattr(graph, "arrays") else graph
     lib = g.load_library()
-    setup = BoutSetup.create(lib, root_assist=root_assist)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
     agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
     cfg = replace(config or BoutConfig(), seconds=seconds, record_qpos=False)

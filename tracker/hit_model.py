@@ -365,7 +365,7 @@ def _collect_worker(args: tuple) -> dict:
     from motion_graph.classify import KINDS
     g = load_graph(graph)
     lib = g.load_library()
-    setup = BoutSetup.create(lib)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params())
     trk = load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
     nf = np.asarray(lib.n_frames, dtype=np.int64)

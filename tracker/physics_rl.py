@@ -498,7 +498,7 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
     from .bout_setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = _library_from(None, library) if library else g.load_library()
-    setup = BoutSetup.create(lib, root_assist=root_assist)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
     trk = trk if trk is not None else load_tracker(tracker)
     rl = load_rl_agent(rl_ckpt, lib)
     spec = style if not hit_model else f"{style}+phys" + ("" if hit_model == "default" else f":{hit_model}")

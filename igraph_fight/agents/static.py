@@ -49,6 +49,8 @@ def dummy_tables(tables: SimTables) -> tuple[SimTables, int]:
         path=np.ascontiguousarray(np.concatenate([tables.path, np.zeros((L, 3))])),
         eff=np.ascontiguousarray(np.concatenate([tables.eff, np.repeat(tables.eff[f0:f0 + 1], L, axis=0)])),
         tgt=np.ascontiguousarray(np.concatenate([tables.tgt, np.repeat(tables.tgt[f0:f0 + 1], L, axis=0)])),
+        arms=(None if tables.arms is None else
+              np.ascontiguousarray(np.concatenate([tables.arms, np.repeat(tables.arms[f0:f0 + 1], L, axis=0)]))),
         strike_offsets=np.append(tables.strike_offsets, tables.strike_offsets[-1]),
         defence_w0=np.append(tables.defence_w0, -1),
         defence_w1=np.append(tables.defence_w1, -1),

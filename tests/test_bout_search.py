@@ -217,6 +217,9 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
     f = trk._aim_reward(env, 0)
     du = trk._duel
     trk._load_duel(env)
+    from tracker.model import EFFECTOR_LABELS
+    for e in EFFECTOR_LABELS:      # one-fighter copies share the bout's fighter-0 fist ids (the solo aim reads them)
+        assert np.array_equal(trk._solos[1].scene.fighters[0].geom_label[e], env.scene.fighters[0].geom_label[e])
     head = int(env.scene.fighters[1].geom_label["head"][0])
     fist = int(env.scene.fighters[0].geom_label["r_fist"][0])
     r = [f(du)]

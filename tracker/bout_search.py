@@ -133,7 +133,7 @@ class BoutSearchTracker:
             sc.reset(solos[k])
             self.searchers.append(sc)
         # per bout (and duel) fighter: fist geoms (both, left, right) and target geoms; a one-fighter
-        # copy has fighter 0's geom ids (the same body)
+        # copy has fighter 0's geom ids (the same body, built first), so its fists are _fists[0]
         from .imitation import leg_mask
         self._legs = leg_mask(solos[0].scene)
         self._fists = [[np.concatenate([fm.geom_label[e] for e in EFFECTOR_LABELS])]
@@ -141,8 +141,6 @@ class BoutSearchTracker:
         self._fist_r = [env.model.geom_size[g, 0].copy() for g in self._fists[0]]
         self._targets = [target_geometry(env.model, np.concatenate([fm.geom_label[t] for t in TARGET_LABELS]))
                          for fm in env.scene.fighters]
-        self._solo_fists = [np.asarray(solos[0].scene.fighters[0].geom_label[e]) for e in EFFECTOR_LABELS]
-        self._solo_fists.insert(0, np.concatenate(self._solo_fists))
         if self._duel is not None:
             self._duel.refs = env.refs
             self.policy.reset(self._duel)
@@ -216,7 +214,7 @@ class BoutSearchTracker:
                 return d.geom_xpos[g], d.geom_xmat[g][:, [2, 5, 8]]
         else:                                       # held, moved on by the opponent's reference
             d = self._solos[k].data
-            fists = self._solo_fists
+            fists = self._fists[0]
             c0 = env.data.geom_xpos[g].copy()
             ax = env.data.geom_xmat[g][:, [2, 5, 8]].copy()
             ref_o = self.refs[o]

@@ -8,14 +8,18 @@
 # glfw pyopengl`), the mocap in .devdata/boxing (the graph is built there unless GRAPH is given).
 # Env: OUT (results), BOUTS (per style per chunk), WORKERS, BUDGET_S (no new chunk after this many
 # seconds), GRAPH, PY, TRACKER (default the shipped policy; e.g. search:16,45:early, fifteenth
-# session), BOUT_SECONDS (bout length, 60), SEED (first chunk's first seed, 10000), CHUNKS (at most, 6). Each chunk writes c<N>_<style>.json (the physics_rl eval format); the end prints the
-# pooled mean per style.
+# session), BOUT_SECONDS (bout length, 60), SEED (first chunk's first seed, 10000), CHUNKS (at most, 6),
+# GRAPH_WORKERS (threads of the graph build there, 16), HIT_MODEL (the IG fighters' first ply: 'default'
+# the shipped hit model, STYLE+phys; 'none' the policy table), EVAL_TIMEOUT (seconds a chunk may run,
+# 0 for no limit: a cut chunk keeps the bouts its workers logged in eval_<style>.log). Each chunk writes c<N>_<style>.json
+# (the physics_rl eval format); the end prints the pooled mean per style.
 set -u
 PY=${PY:-python3}
 OUT=${OUT:-/tmp/devout}; mkdir -p "$OUT"
 BOUTS=${BOUTS:-64}; WORKERS=${WORKERS:-16}; BUDGET_S=${BUDGET_S:-330}; GRAPH=${GRAPH:-}
 TRACKER=${TRACKER:-tracker/checkpoints/boxing_cmu13.pt}; SECONDS_BOUT=${BOUT_SECONDS:-60}; SEED=${SEED:-10000}
-CHUNKS=${CHUNKS:-6}
+CHUNKS=${CHUNKS:-6}; GRAPH_WORKERS=${GRAPH_WORKERS:-16}; HIT_MODEL=${HIT_MODEL:-default}
+HM="--hit-model"; [ "$HIT_MODEL" = none ] && HM=""; [ "$HIT_MODEL" != none ] && [ "$HIT_MODEL" != default ] && HM="--hit-model $HIT_MODEL"
 export PYTHONPATH=$PWD
 if [ -n "${INSTALL:-}" ]; then
   $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl 2>&1 | tail -2
@@ -24,17 +28,21 @@ fi
 nproc; $PY -c "import mujoco, numba, torch, numpy; print('mujoco', mujoco.__version__, 'numba', numba.__version__, 'torch', torch.__version__, 'numpy', numpy.__version__)"
 if [ -z "$GRAPH" ]; then
   GRAPH=/tmp/g.igz; t0=$(date +%s)
-  $PY -m igraph_fight.cli build --mocap .devdata/boxing --out $GRAPH > "$OUT/build.log" 2>&1 || { tail -40 "$OUT/build.log"; exit 1; }
+  $PY -m igraph_fight.cli build --mocap .devdata/boxing --out $GRAPH --workers $GRAPH_WORKERS > "$OUT/build.log" 2>&1 || { tail -40 "$OUT/build.log"; exit 1; }
   echo "graph built in $(( $(date +%s) - t0 )) s"; tail -3 "$OUT/build.log"
 fi
 T0=$(date +%s)
+# one thread per bout process (16 processes ran about 2.5x slower per process than one process on the
+# development VM in the thirteenth and fifteenth sessions; with one thread each still about 2x in the
+# eighteenth, so the pools were not the cause: tracker/BOUTS.md, eighteenth session)
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 for c in $(seq 0 $((CHUNKS - 1))); do
   [ $(( $(date +%s) - T0 )) -gt "$BUDGET_S" ] && break
   t1=$(date +%s)
   # the two styles side by side, half the workers each (a style's bouts are one pool)
   for st in infighter outboxer; do
-    $PY -m tracker.physics_rl eval --graph $GRAPH --tracker "$TRACKER" --styles $st --seconds $SECONDS_BOUT \
-      --bouts $BOUTS --seed0 $((SEED + BOUTS * c)) --hit-model --workers $((WORKERS / 2)) --out "$OUT/c${c}_$st.json" \
+    timeout ${EVAL_TIMEOUT:-0} $PY -m tracker.physics_rl eval --graph $GRAPH --tracker "$TRACKER" --styles $st --seconds $SECONDS_BOUT \
+      --bouts $BOUTS --seed0 $((SEED + BOUTS * c)) $HM --workers $((WORKERS / 2)) --out "$OUT/c${c}_$st.json" \
       >> "$OUT/eval_$st.log" 2>&1 &
   done
   wait || true

@@ -162,6 +162,10 @@ def test_aim_and_duel_spec():
     assert "touch 10" in t.describe()
     with pytest.raises(ValueError, match="touch weight >= 0"):
         load_tracker("search:touch=-1")
+    t = load_tracker("search:lead=2")
+    assert (t.lead, t.aiming) == (2.0, True) and "pelvis lead 2" in t.describe()
+    with pytest.raises(ValueError, match="lead weight >= 0"):
+        load_tracker("search:lead=-1")
 
 
 @pytest.mark.realdata
@@ -235,3 +239,28 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
     du.t += 10
     r.append(f(du))                                       # past the window
     assert r[0] < 2.0 and 6.9 < r[1] <= 7.0 and r[2] < 0.1 * r[1] and r[3] == 0.0, r
+
+
+@pytest.mark.realdata
+def test_lead_reward_keeps_the_striker_on_its_reference(setup):
+    """The lead term: about its weight with the striker's pelvis on its reference, from LEAD_IN_STEPS
+    before the strike window to its end; near zero with the pelvis 0.3 m off; none earlier."""
+    from tracker.bout_search import LEAD_IN_STEPS, BoutSearchTracker
+    from tracker.policy import load_policy
+    trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=30), duel=True, lead=2.0)
+    bout = _guard_bout(setup, trk, distance=1.0)
+    env = bout.env
+    t = env.t
+    trk.aims = [[(t + 20, t + 25, 1)], []]
+    f = trk._aim_reward(env, 0)
+    du = trk._duel
+    trk._load_duel(env)
+    a = env.scene.fighters[0].qpos_adr
+    du.data.qpos[a:a + 2] = env.refs[0].qpos[t + 20 - LEAD_IN_STEPS, :2]
+    du.t = t + 20 - LEAD_IN_STEPS
+    on = f(du)
+    du.data.qpos[a] += 0.3
+    off = f(du)
+    du.t = t + 20 - LEAD_IN_STEPS - 1
+    early = f(du)
+    assert abs(on - 2.0) < 1e-9 and off < 0.01 and early == 0.0, (on, off, early)

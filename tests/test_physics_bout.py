@@ -290,6 +290,10 @@ def test_planned_hit_windows_and_how_near_the_fist_came(setup):
     bout, p, w, side, offered = found
     assert (w[0], w[1], side) in [x for o in offered for x in o]
     assert bout.planned_windows(0, w[1]) == []                         # passed: not offered any more
+    # the miss anatomy at the predicted instant: the physical distance splits into the references'
+    # (the prediction) and the two lags along the line (the rest is sideways)
+    along = p["ref_distance_m"] + p["lag_attacker_m"] + p["lag_victim_m"]
+    assert p["distance_m"] + 1e-3 >= along > p["distance_m"] - 0.1, p
     res = bout.finish()
     s = res.summary()
     assert len(s["planned_closest_m"]) == len(res.planned_events)

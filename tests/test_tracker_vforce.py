@@ -104,6 +104,7 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
     from tracker.env import TrackingEnv
     from tracker.model import build_fighter_scene
     from tracker.reference import build_reference, placement_transform
+    from tracker.vforce import _xy_mean
     scene = build_fighter_scene(setup.spec, 2)
     env = TrackingEnv(scene, setup.config)
     walks = draw_walks(setup.source, 2, 4, 11)
@@ -129,6 +130,11 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
         got = layer.stance_feet(d)
         assert got == [sorted(w) for w in want]
         seen.update(len(g) for g in got)
+        # the feet's centroid kernel: bit for bit the numpy mean the layer used before it
+        for fi in layer.fighters:
+            for leg in fi.legs.values():
+                assert np.array_equal(_xy_mean(d.geom_xpos, leg["geoms"]),
+                                      d.geom_xpos[leg["geoms"], :2].sum(0) / len(leg["geoms"]))
     assert {1, 2} <= seen          # single and double support both occurred
 
 

@@ -44,7 +44,8 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   A planned hit is realised when the same strike of the same action instance lands physically;
   each planned hit also records ``closest_m``, how near the strike's fist came to the opponent's
   head, chest or belly at the control steps of its open window while both stood (a search tracker
-  may aim the open windows: ``planned_windows``).
+  may aim the open windows: ``planned_windows``), and, at its predicted instant, the physical and
+  the predicted pelvis distance and each pelvis's lag behind its reference (``_miss_anatomy``).
 * Falls (tracker.fall.detect_fall, the one definition: a non-foot geom on the floor, or the pelvis
   35 cm below the reference pelvis): the fall is counted, the fighter lies for ``fall_pause_s``
   (its PD holds its last reference pose; no hits by or on it count), then it is reset to a
@@ -489,6 +490,7 @@ class PhysicsBout:
                 f.reward_total[key] += val
             f.steps_since += 1
         self._gap = min(gaps)
+        self._miss_anatomy(t)
         # how near each planned hit's fist came while its window was open (m; the log's closest_m)
         for k in (0, 1):
             if self.F[k].down or self.F[1 - k].down:
@@ -497,6 +499,26 @@ class PhysicsBout:
                 if w0 <= t < w1:
                     g = self.judge.fist_target_distance(d, k, 1 - k, side)
                     p["closest_m"] = round(min(p.get("closest_m", np.inf), g), 4)
+
+    def _miss_anatomy(self, t: int) -> None:
+        """At a planned hit's predicted instant, where the bodies are against the prediction (m):
+        ``distance_m`` the physical pelvis distance, ``ref_distance_m`` the references' (the
+        prediction: both references were placed at the predicted poses of the decision that planned
+        the hit, and neither fighter decides again before it), and how far each pelvis lags its
+        reference along the line between them (``lag_attacker_m``: positive when the attacker is
+        farther back than its reference, ``lag_victim_m``: positive when the victim is farther
+        away); distance_m is ref_distance_m + both lags, plus what lies sideways."""
+        for p in self.planned_events[-40:]:
+            if p["step"] != t or "distance_m" in p or self.F[0].down or self.F[1].down:
+                continue
+            a, v = p["attacker"], p["victim"]
+            pa, pv = self.pelvis_xy(a), self.pelvis_xy(v)
+            ra, rv = self.F[a].ref.qpos[t, :2], self.F[v].ref.qpos[t, :2]
+            u = (rv - ra) / max(float(np.linalg.norm(rv - ra)), 1e-9)     # attacker -> victim, reference
+            p["distance_m"] = round(float(np.linalg.norm(pv - pa)), 4)
+            p["ref_distance_m"] = round(float(np.linalg.norm(rv - ra)), 4)
+            p["lag_attacker_m"] = round(float((ra - pa) @ u), 4)
+            p["lag_victim_m"] = round(float((pv - rv) @ u), 4)
 
     # ------------------------------------------------------------------ falls
     def _falls_and_resets(self, t: int, info) -> bool:

@@ -87,11 +87,12 @@ class MenuAgent:
 def load_tracker(spec: str | None = None):
     """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
     (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
-    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:spread=F][:duel][:CKPT]"``: that
+    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:CKPT]"``: that
     policy steered by a run-time search (tracker.bout_search; default tracker.bout_search.BOUT_SEARCH;
     C candidates, L look-ahead control steps, early acceptance on or off, and the other knobs of
     tracker.search_controller.SearchSettings; aim=W: the planned strikes aimed with weight W (touch=W: and
-    each rollout step with the strike's fist on a target rewarded with W; spread=F:
+    each rollout step with the strike's fist on a target rewarded with W; lead=W: the striker's pelvis
+    kept on its reference from 0.5 s before each planned strike's window to its end; spread=F:
     the arm offsets' sigma times F while aiming); duel:
     the rollouts in a copy of the whole bout, the opponent on its plain policy;
     offline quality, slower than real time).
@@ -115,14 +116,14 @@ _FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept"}   # sp
 
 
 def load_bout_search(spec: str):
-    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:spread=F][:duel][:CKPT]`` ->
+    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:CKPT]`` ->
     tracker.bout_search.BoutSearchTracker (see load_tracker)."""
     from dataclasses import replace
 
     from .bout_search import BOUT_SEARCH, BoutSearchTracker
     from .policy import load_policy
     settings, ckpt, duel = BOUT_SEARCH, None, False
-    aimed = {"aim": 0.0, "touch": 0.0, "spread": 1.0}
+    aimed = {"aim": 0.0, "touch": 0.0, "lead": 0.0, "spread": 1.0}
     for tok in spec.split(":")[1:]:
         c, comma, la = tok.partition(",")
         if comma and c.isdigit() and la.isdigit():
@@ -135,7 +136,7 @@ def load_bout_search(spec: str):
             settings = replace(settings, **{_FLAGS[tok]: True})
         elif tok == "duel":
             duel = True
-        elif tok.startswith(("aim=", "touch=", "spread=")):
+        elif tok.startswith(("aim=", "touch=", "lead=", "spread=")):
             name, _, val = tok.partition("=")
             try:
                 aimed[name] = float(val)
@@ -150,7 +151,7 @@ def load_bout_search(spec: str):
         elif tok:
             ckpt = tok
     return BoutSearchTracker(load_policy(ckpt), settings, aim=aimed["aim"], duel=duel, aim_spread=aimed["spread"],
-                             touch=aimed["touch"])
+                             touch=aimed["touch"], lead=aimed["lead"])
 
 
 def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", future: str = "calibrated"):

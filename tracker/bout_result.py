@@ -83,6 +83,9 @@ class PhysicsBoutResult:
             # per planned hit: 0 when it landed, else how near the strike's fist came to the opponent's
             # head/chest/belly while its window was open and both stood (m; None: it never was)
             "planned_closest_m": [0.0 if e.get("realised") else e.get("closest_m") for e in self.planned_events],
+            # per planned hit, at its predicted instant (tracker.bout's miss anatomy; None: a fighter was down):
+            # how far the striker's pelvis was behind its reference along the line to the opponent (m)
+            "planned_lag_attacker_m": [e.get("lag_attacker_m") for e in self.planned_events],
             "touches_a": int(self.touches[0]), "touches_b": int(self.touches[1]),
             "damage_n_a": float(self.damage_n[0]), "damage_n_b": float(self.damage_n[1]),
             "reward_a": self.reward[0], "reward_b": self.reward[1],

@@ -42,7 +42,35 @@ from __future__ import annotations
 from dataclasses import astuple, dataclass
 
 import mujoco
+import numba
 import numpy as np
+
+
+@numba.njit(cache=True)
+def _stance_mask(pairs: np.ndarray, floor: int, owner: np.ndarray) -> int:
+    """Bit 2k+i set when foot i of fighter k touches the floor, from the contacts' geom pairs
+    ((ncon, 2) ints; owner maps a geom to 2k+i or -1)."""
+    mask = 0
+    for c in range(pairs.shape[0]):
+        a, b = pairs[c, 0], pairs[c, 1]
+        other = b if a == floor else (a if b == floor else -1)
+        code = owner[other]
+        if code >= 0:
+            mask |= 1 << code
+    return mask
+
+
+@numba.njit(cache=True)
+def _xy_mean(xpos: np.ndarray, geoms: np.ndarray) -> np.ndarray:
+    """Mean ground position of the geoms (rows added in order, as numpy's sum over axis 0 does)."""
+    out = np.zeros(2)
+    for g in geoms:
+        out[0] += xpos[g, 0]
+        out[1] += xpos[g, 1]
+    n = geoms.shape[0]
+    out[0] /= n
+    out[1] /= n
+    return out
 
 
 @dataclass(frozen=True)
@@ -156,6 +184,10 @@ class VirtualForceBalance:
             for i, (s, leg) in enumerate(fi.legs.items()):
                 self._owner[leg["geoms"]] = 2 * k + i
         self._sides = [tuple(fi.legs) for fi in self.fighters]
+        # per fighter, the stance sides for each pair of its two bits in _stance_mask (codes ascending)
+        self._stance_of = [[[sd[i] for i in range(2) if b >> i & 1] for b in range(4)] for sd in self._sides]
+        self._leg_acts = [np.concatenate([leg["acts"] for leg in fi.legs.values()]) for fi in self.fighters]
+        self._no_pairs = np.zeros((0, 2), np.int32)
         self._frames = [_RefFrame(env.model) for _ in self.fighters]
         self._base = np.zeros(env.model.nu)
         self._jp = np.zeros((3, env.model.nv))
@@ -186,14 +218,8 @@ class VirtualForceBalance:
 
     def stance_feet(self, d: mujoco.MjData) -> list[list[str]]:
         """Per fighter, the sides ("l", "r", sorted) whose foot geoms touch the floor now."""
-        out: list[list[str]] = [[] for _ in self.fighters]
-        if d.ncon:
-            g = d.contact.geom[:d.ncon]
-            other = np.where(g[:, 0] == self.floor, g[:, 1], np.where(g[:, 1] == self.floor, g[:, 0], -1))
-            for code in sorted(set(self._owner[other].tolist())):     # codes ascending: sides sorted
-                if code >= 0:
-                    out[code // 2].append(self._sides[code // 2][code % 2])
-        return out
+        mask = _stance_mask(d.contact.geom[:d.ncon] if d.ncon else self._no_pairs, self.floor, self._owner)
+        return [list(self._stance_of[k][mask >> 2 * k & 3]) for k in range(len(self.fighters))]
 
     def _steer(self, d: mujoco.MjData, k: int) -> None:
         """This control step's world-frame bias of fighter k (``bias`` turned by the pelvis's heading)."""
@@ -228,10 +254,10 @@ class VirtualForceBalance:
                     self._steer(d, k)
         stance = self.stance_feet(d)
         need = [k for k, g in enumerate(self.gains) if g is not None and stance[k]]
-        for k, fi in enumerate(self.fighters):
+        for k in range(len(self.fighters)):
             if self.gains[k] is not None:
-                for leg in fi.legs.values():
-                    d.ctrl[leg["acts"]] = self._base[leg["acts"]]
+                ids = self._leg_acts[k]
+                d.ctrl[ids] = self._base[ids]
         if not need:
             return
         mujoco.mj_subtreeVel(m, d)
@@ -240,17 +266,21 @@ class VirtualForceBalance:
             feet = stance[k]
             c = d.subtree_com[fi.pelvis]
             v = d.subtree_linvel[fi.pelvis]
-            # (the same arithmetic as np.mean over the geoms, then over the feet, without its overhead)
-            cen = [d.geom_xpos[fi.legs[side]["geoms"], :2].sum(0) / len(fi.legs[side]["geoms"]) for side in feet]
+            # (the same arithmetic as np.mean over the geoms, then over the feet, without its overhead;
+            # the wrench below in scalars, the same operations in the same order as on the 2-vectors)
+            cen = [_xy_mean(d.geom_xpos, fi.legs[side]["geoms"]) for side in feet]
             fs = cen[0] if len(feet) == 1 else (cen[0] + cen[1]) / 2
             fr = tr.feet[feet[0]] if len(feet) == 1 else (tr.feet[feet[0]] + tr.feet[feet[1]]) / 2
             F = np.zeros(3)
+            kp, kd = g.com_kp, g.com_kd
             if self._bq[k] is None:
-                F[:2] = g.com_kp * ((tr.com[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] - v[:2])
+                for i in (0, 1):
+                    F[i] = kp * ((tr.com[i] - fr[i]) - (c[i] - fs[i])) + kd * (tr.vel[i] - v[i])
                 target = tr.quat
             else:
                 bw = self._bw[k]
-                F[:2] = g.com_kp * ((tr.com[:2] + bw[:2] - fr) - (c[:2] - fs)) + g.com_kd * (tr.vel[:2] + bw[2:] - v[:2])
+                for i in (0, 1):
+                    F[i] = kp * ((tr.com[i] + bw[i] - fr[i]) - (c[i] - fs[i])) + kd * (tr.vel[i] + bw[2 + i] - v[i])
                 target = self._bq[k]
             if g.drift_kp:
                 F[:2] += g.drift_kp * (tr.com[:2] - c[:2])
@@ -266,7 +296,7 @@ class VirtualForceBalance:
                 mujoco.mj_jac(m, d, self._jp, self._jr, d.xpos[fi.pelvis], leg["body"])
                 cols = leg["cols"]
                 tau = -(self._jp[:, cols].T @ Fs + self._jr[:, cols].T @ Ts)
-                np.clip(tau, -g.torque_clip, g.torque_clip, out=tau)
+                np.minimum(np.maximum(tau, -g.torque_clip, out=tau), g.torque_clip, out=tau)   # np.clip's arithmetic
                 ids = leg["acts"]
                 # the gains as they are now: the layer outlives a controller's set_gains
                 d.ctrl[ids] = self._base[ids] + tau / np.maximum(m.actuator_gainprm[ids, 0], 1e-9)

@@ -508,8 +508,10 @@ class PhysicsBout:
         reference along the line between them (``lag_attacker_m``: positive when the attacker is
         farther back than its reference, ``lag_victim_m``: positive when the victim is farther
         away); distance_m is ref_distance_m + both lags, plus what lies sideways."""
+        if self.F[0].down or self.F[1].down:
+            return
         for p in self.planned_events[-40:]:
-            if p["step"] != t or "distance_m" in p or self.F[0].down or self.F[1].down:
+            if p["step"] != t or "distance_m" in p:
                 continue
             a, v = p["attacker"], p["victim"]
             pa, pv = self.pelvis_xy(a), self.pelvis_xy(v)

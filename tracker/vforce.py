@@ -187,7 +187,6 @@ class VirtualForceBalance:
         # per fighter, the stance sides for each pair of its two bits in _stance_mask (codes ascending)
         self._stance_of = [[[sd[i] for i in range(2) if b >> i & 1] for b in range(4)] for sd in self._sides]
         self._leg_acts = [np.concatenate([leg["acts"] for leg in fi.legs.values()]) for fi in self.fighters]
-        self._no_pairs = np.zeros((0, 2), np.int32)
         self._frames = [_RefFrame(env.model) for _ in self.fighters]
         self._base = np.zeros(env.model.nu)
         self._jp = np.zeros((3, env.model.nv))
@@ -218,7 +217,7 @@ class VirtualForceBalance:
 
     def stance_feet(self, d: mujoco.MjData) -> list[list[str]]:
         """Per fighter, the sides ("l", "r", sorted) whose foot geoms touch the floor now."""
-        mask = _stance_mask(d.contact.geom[:d.ncon] if d.ncon else self._no_pairs, self.floor, self._owner)
+        mask = _stance_mask(d.contact.geom, self.floor, self._owner)     # (ncon, 2): MuJoCo's live contacts
         return [list(self._stance_of[k][mask >> 2 * k & 3]) for k in range(len(self.fighters))]
 
     def _steer(self, d: mujoco.MjData, k: int) -> None:

@@ -926,6 +926,15 @@ class NPCController:
 
     def act(self, obs: Observation) -> Decision:
         """The action for one live state (see the module docstring)."""
+        return self._choose(obs, commit=True)
+
+    def peek(self, obs: Observation) -> int:
+        """The action act() would choose for ``obs``, without side effects: the best edge where a
+        stochastic controller would spin its roulette, and no edge usage counted (a guess at a
+        future decision, e.g. tracker.bout's foresight for a search tracker's look-ahead)."""
+        return int(self._choose(obs, commit=False).action)
+
+    def _choose(self, obs: Observation, commit: bool) -> Decision:
         table = self._table  # one read: a consistent snapshot
         a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_ea, table.q_me, float(obs.r),
                                   float(obs.theta_self), float(obs.theta_other), int(obs.m_self), int(obs.m_other),
@@ -938,11 +947,11 @@ class NPCController:
             la, _ = self._lookahead(table, obs)
             if la >= 0:
                 a, e = la, -1
-        elif self.stochastic and s >= 0:
+        elif self.stochastic and s >= 0 and commit:
             re = self._roulette(table, s, int(obs.m_self))
             if re >= 0:
                 e, a = re, int(self._edge_action[re])
-        if e >= 0 and self.usage_penalty > 0.0:
+        if e >= 0 and self.usage_penalty > 0.0 and commit:
             self._usage[e] = self._usage.get(e, 0) + 1
         return Decision(a, s, d, off, e)
 

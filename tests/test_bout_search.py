@@ -264,3 +264,64 @@ def test_lead_reward_keeps_the_striker_on_its_reference(setup):
     du.t = t + 20 - LEAD_IN_STEPS - 1
     early = f(du)
     assert abs(on - 2.0) < 1e-9 and off < 0.01 and early == 0.0, (on, off, early)
+
+
+def test_foresee_spec():
+    t = load_tracker("search:4,9:foresee")
+    assert t.foresee_steps == t.s.segment + 9 + 2 and "next actions foreseen" in t.describe()
+    assert load_tracker("search").foresee_steps == 0
+
+
+class _Foreseeing:
+    """The shipped policy with the bout's foresight asked for (nothing searched: it must not change
+    the bout)."""
+
+    def __init__(self, policy, steps: int) -> None:
+        self.policy, self.foresee_steps, self.obs_future = policy, steps, policy.obs_future
+
+    def reset(self, env) -> None:
+        self.policy.reset(env)
+
+    def act(self, env, obs):
+        return self.policy.act(env, obs)
+
+
+@pytest.mark.realdata
+def test_foresight_guesses_the_next_actions_and_leaves_the_bout_alone(setup):
+    """Foresight writes the scripted agents' next actions past their current ones (their peek
+    copies the generator, so the guesses are the real decisions), and the bout played with it is
+    the bout without it, bit for bit (the tracking policy never reads the guessed frames)."""
+    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
+    from tracker.policy import load_policy
+    from test_physics_bout import _facing_start
+
+    class Logged(MenuAgent):
+        def __init__(self, name):
+            super().__init__(name=name)
+            self.peeks = []
+
+        def peek(self, ctx):
+            a = super().peek(ctx)
+            self.peeks.append((round(ctx.t_s, 4), a))
+            return a
+
+    lib = setup.library
+    guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
+    traces, bouts = [], []
+    for steps in (0, 48):
+        bout = PhysicsBout(setup, [Logged("a"), Logged("b")], _Foreseeing(load_policy(), steps), BoutConfig(seconds=2.0))
+        bout.start(seed=3, initial=_facing_start(setup, guards[0], distance=2.5))
+        f = bout.F[0]
+        moving = np.abs(f.ref.qvel[f.t_dec_end + 1:f.t_dec_end + 20]).max()
+        assert (moving > 0.05) == bool(steps), moving          # guessed motion, else the last frame held
+        traces.append(_trace(bout, 58))
+        bouts.append(bout)
+    np.testing.assert_array_equal(traces[0], traces[1])
+    plain = [{k: v for k, v in d.items() if k != "foreseen"} for d in bouts[1].decisions]
+    assert bouts[0].decisions == plain and not bouts[0].agents[0].peeks
+    assert [d["foreseen"] for d in bouts[1].decisions if "foreseen" in d] == [True] * (len(plain) - 2)
+    for k in (0, 1):
+        real = [(d["t"], d["action"]) for d in bouts[1].decisions if d["player"] == k][1:]
+        peeks = dict(bouts[1].agents[k].peeks)
+        assert all(peeks.get(t) == a for t, a in real), (real, peeks)
+    assert len(real) + len([d for d in bouts[1].decisions if d["player"] == 0][1:]) >= 2

@@ -258,16 +258,23 @@ def test_roulette_is_reproducible_and_follows_the_scores(graph_lib):
     lo, hi = int(off[s]), int(off[s + 1])
     T = 0.5
 
-    def draws(seed, n):
+    def draws(seed, n, peek=False):
         c = NPCController(g, lib, style="balanced", depth=3, offgraph="nearest", stochastic=True, temperature=T,
-                          seed=seed)
-        out = [c.act(o).edge for _ in range(n)]
+                          seed=seed, usage_penalty=0.5 if peek else 0.0)
+        out = []
+        for _ in range(n):
+            if peek:   # peek: the best edge's action, no draw taken, no usage counted
+                assert c.peek(o) == int(c._edge_action[lo + int(np.argmax(c._table.q_me[lo:hi]))])
+                assert not c._usage
+            out.append(c.act(o).edge)
+            if peek:
+                c._usage.clear()
         q = c._table.q_me[lo:hi].astype(np.float64)
         c.close()
         return np.array(out), q
 
     e1, q = draws(7, 3000)
-    e2, _ = draws(7, 3000)
+    e2, _ = draws(7, 3000, peek=True)
     e3, _ = draws(8, 3000)
     assert np.array_equal(e1, e2) and not np.array_equal(e1, e3)
     assert np.all((e1 >= lo) & (e1 < hi))

@@ -144,6 +144,9 @@ def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_grap
     assert q1[j] - q0[j] == pytest.approx(st.w_dmg_given * pref)
     others = np.arange(len(q0)) != j
     assert np.allclose(q1[others], q0[others])
+    sure = PhysIGAgent(npc, model(80.0))
+    assert sure.peek(ctx) == sure.decide(ctx) == int(mt1[int(np.argmax(q1)), MT_ACTION])   # peek: decide, uncounted
+    assert sure.decisions == 1
     with pytest.raises(ValueError, match="future must be one of"):
         PhysIGAgent(npc, model(0.0), future="later")
     assert PhysIGAgent(npc, model(0.0), future="none").scores(ctx)[2] == pytest.approx(

@@ -111,6 +111,7 @@ class PhysicsBout:
         self.fms = setup.scene.fighters
         self.judge = HitJudge(self.model, self.fms, self.lib, config)
         self._trace_tables = None
+        self._foresight = int(getattr(tracker, "foresee_steps", 0) or 0) > 0
         self.schedule: list[tuple[float, Callable[[], None], str]] = []
         self.hook_gap_m = 0.5
 
@@ -151,6 +152,7 @@ class PhysicsBout:
         self.touch_events: list[dict] = []
         self.notes: list[dict] = []
         self.last_decider = -1
+        self._guess: list[tuple[int, int] | None] = [None, None]   # foresight's next action: (step, action)
         self.damage = np.zeros(2)
         self.judge.clear()
         self._prev_v = [None, None]
@@ -169,6 +171,8 @@ class PhysicsBout:
         # first decisions at t = 0 (no physics yet: the poses are the initial world's)
         self._decide_due(0, initial_world=w0)
         self._obs = env.reset([self.F[0].ref, self.F[1].ref], 0)
+        for k in range(2):
+            self._foresee(k, 0)
         self.tracker.reset(env)
         if self.setup.root_assist:
             env.set_root_assist(True)
@@ -184,6 +188,9 @@ class PhysicsBout:
             _, cb, note = self._pending.pop(0)
             cb()
             self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
+        if self._foresight:                         # guesses refreshed from the physical state now
+            for k in (0, 1):
+                self._foresee(k, env.t, record=False)
         if hasattr(self.tracker, "idle"):          # a search tracker skips fallen fighters
             self.tracker.idle = [f.down for f in self.F]
         if getattr(self.tracker, "aiming", False):   # and may aim the planned strikes
@@ -367,6 +374,64 @@ class PhysicsBout:
         bal[sl] = bal[t_last]
         bal[sl, 3:6] = 0.0
 
+    def _foresee(self, k: int, t: int, record: bool = True) -> None:
+        """Foresight for a search tracker's look-ahead (``tracker.foresee_steps`` > 0): past fighter
+        k's current action, write into its reference buffer the actions its agent would choose
+        (``agent.peek``, no side effects), each from the coupled state predicted at the end of the
+        one before, until ``foresee_steps`` past the current action's end, instead of that action's
+        last frame held still. A guess, named approximation: the real decision (``lead`` steps
+        before the action's end, from the physical state then) may differ, and rewrites the buffer
+        from its own step. Each guessed action starts one frame after the previous one's last frame
+        (a real decision overwrites that last frame, which the decisions' own predictions read, so
+        the guesses leave it alone); the opponent's action and frame are its real ones (clamped at
+        the last frame). The tracking policy never reads these frames (its horizon, ``lead``, ends
+        where the next real decision writes), only the search's rollouts do. Called after every
+        decision and reset (``record``: the first guess is kept, and the decision it guessed logs
+        ``foreseen``, whether it was right) and, from the physical state then, before every control
+        step's tracking (so the guesses the search reads are at most one step old)."""
+        from igraph_fight.controller import Observation
+        from igraph_fight.state import WorldState, to_sample
+        from igraph_fight import sim as ksim
+        horizon = int(getattr(self.tracker, "foresee_steps", 0) or 0)
+        f = self.F[k]
+        agent = self.agents[k]
+        if record:
+            self._guess[k] = None
+        if horizon <= 0 or f.down or not hasattr(agent, "peek"):
+            return
+        o = 1 - k
+        a_prev = f.segments[-1].action
+        t_end = f.t_dec_end
+        stop = min(f.t_dec_end + horizon, self.T - 2)
+        while t_end < stop:
+            xs, zs, hs = np.zeros(2), np.zeros(2), np.zeros(2)
+            for j in (k, o):
+                xs[j], zs[j], hs[j] = self.predicted_pose(j, t, t_end)
+            ao, fo, io = self.F[o].action_frame(t_end, self.nf)
+            acts = np.zeros(2, dtype=np.int64)
+            frs = np.zeros(2, dtype=np.int64)
+            acts[k], frs[k] = a_prev, int(self.nf[a_prev]) - 1
+            acts[o], frs[o] = ao, fo
+            res = np.zeros(2, dtype=np.int64)
+            res[o] = self.F[o].resolved.get(io, 0)
+            world = WorldState(xs, zs, hs, acts, frs, res)
+            si, sf = to_sample(self.tables, world, k)
+            obs = Observation(float(sf[ksim.SF_R]), float(sf[ksim.SF_TH_SELF]), float(sf[ksim.SF_TH_OTHER]),
+                              int(si[ksim.SI_MSELF]), int(si[ksim.SI_MOTHER]), int(si[ksim.SI_FOTHER]),
+                              int(si[ksim.SI_MASK]))
+            menu = self.tables.menu(a_prev)
+            if len(menu) == 0:
+                return
+            ctx = DecisionContext(k, t_end / 30.0, obs, menu, world, self.features(k), dict(f.reward), f.steps_since)
+            a = int(agent.peek(ctx))
+            if a not in set(int(x) for x in menu):
+                return
+            if record and self._guess[k] is None:
+                self._guess[k] = (t_end, a)
+            self._write_segment(k, t_end + 1, a, a_prev, (float(xs[k]), float(zs[k]), float(hs[k])), -1)
+            t_end = t_end + int(self.nf[a])
+            a_prev = a
+
     # ------------------------------------------------------------------ decisions
     def _decide_due(self, t: int, initial_world=None) -> bool:
         """Ask every fighter whose action ends within ``lead`` steps for its next action; then
@@ -414,10 +479,16 @@ class PhysicsBout:
                                    "theta_other": round(float(sf[ksim.SF_TH_OTHER]), 4),
                                    "m_other": int(si[ksim.SI_MOTHER]), "f_other": int(si[ksim.SI_FOTHER]),
                                    "decided_at": round(t / 30.0, 4)})
+            g = self._guess[k]
+            if g is not None and g[0] == t_e:      # foresight's guess for this decision (self._foresee)
+                self.decisions[-1]["foreseen"] = g[1] == a
             if t_e not in instants:
                 instants.append(t_e)
         for t_e in instants:
             self._predict(t_e, t, initial_world)
+        if initial_world is None:
+            for k in due:
+                self._foresee(k, t)
         return True
 
     def _predict(self, t_e: int, t_now: int, initial_world=None) -> None:
@@ -541,6 +612,7 @@ class PhysicsBout:
                 xy = f.ref.qpos[t, :2].copy() if cfg.reset_place == "reference" else self.pelvis_xy(k)
                 f.fall_pose = (xy, self.fighting_heading(k, t))
                 self._hold_after(k, t)
+                self._guess[k] = None
                 f.t_dec_end = f.reset_at + int(self.nf[g]) - 1
                 self.fall_events.append({"t": round(t / 30.0, 4), "player": k, "reason": info.fall[k],
                                          "reset_t": round(f.reset_at / 30.0, 4)})
@@ -579,6 +651,7 @@ class PhysicsBout:
         mujoco.mj_forward(self.model, d)
         f.down = False
         f.t_dec_end = t + int(self.nf[g]) - 1
+        self._foresee(k, t)
         self._prev_v[k] = None
         self.notes.append({"t": round(t / 30.0, 4), "note": f"{'AB'[k]} reset to guard after a fall"})
 

@@ -3,6 +3,7 @@
 loaders the command line uses (tracking controller, agent from a name)."""
 from __future__ import annotations
 
+import copy
 import os
 import sys
 from typing import NamedTuple, Protocol
@@ -32,7 +33,9 @@ class DecisionContext(NamedTuple):
 
 class Agent(Protocol):
     """An action chooser. Optional: ``finish(k, reward, steps)``, called at the bout's end with the
-    reward terms accumulated since the agent's last decision (learning agents)."""
+    reward terms accumulated since the agent's last decision (learning agents); ``peek(ctx)``, what
+    decide(ctx) would answer, without side effects (a guess at a future decision: PhysicsBout's
+    foresight for a search tracker's look-ahead)."""
 
     name: str
 
@@ -64,6 +67,10 @@ class IGAgent:
         self.off_graph += int(d.off_graph)
         return int(d.action)
 
+    def peek(self, ctx: DecisionContext) -> int:
+        """What decide() would answer for ``ctx``, without side effects (NPCController.peek)."""
+        return self.controller.peek(ctx.obs)
+
 
 class MenuAgent:
     """Scripted: a fixed preference list (first legal one wins), else a random legal action."""
@@ -77,24 +84,33 @@ class MenuAgent:
         self.rng = np.random.default_rng(rng.integers(1 << 31))
 
     def decide(self, ctx: DecisionContext) -> int:
+        return self._choose(ctx, self.rng)
+
+    def peek(self, ctx: DecisionContext) -> int:
+        """What decide(ctx) would answer (its generator copied, so none of its draws is used)."""
+        return self._choose(ctx, copy.deepcopy(self.rng))
+
+    def _choose(self, ctx: DecisionContext, rng: np.random.Generator) -> int:
         menu = set(int(a) for a in ctx.menu)
         for a in self.prefer:
             if a in menu:
                 return a
-        return int(self.rng.choice(ctx.menu))
+        return int(rng.choice(ctx.menu))
 
 
 def load_tracker(spec: str | None = None):
     """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
     (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
-    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:CKPT]"``: that
+    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]"``: that
     policy steered by a run-time search (tracker.bout_search; default tracker.bout_search.BOUT_SEARCH;
     C candidates, L look-ahead control steps, early acceptance on or off, and the other knobs of
     tracker.search_controller.SearchSettings; aim=W: the planned strikes aimed with weight W (touch=W: and
     each rollout step with the strike's fist on a target rewarded with W; lead=W: the striker's pelvis
     kept on its reference from 0.5 s before each planned strike's window to its end; spread=F:
     the arm offsets' sigma times F while aiming); duel:
-    the rollouts in a copy of the whole bout, the opponent on its plain policy;
+    the rollouts in a copy of the whole bout, the opponent on its plain policy; foresee: the look-ahead
+    past a fighter's current action reads the actions its agent would choose next (PhysicsBout._foresee)
+    instead of the action's last frame held still;
     offline quality, slower than real time).
     The environment variable IGRAPH_FIGHT_TRACKER gives the default."""
     spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
@@ -116,13 +132,13 @@ _FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept"}   # sp
 
 
 def load_bout_search(spec: str):
-    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:CKPT]`` ->
+    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]`` ->
     tracker.bout_search.BoutSearchTracker (see load_tracker)."""
     from dataclasses import replace
 
     from .bout_search import BOUT_SEARCH, BoutSearchTracker
     from .policy import load_policy
-    settings, ckpt, duel = BOUT_SEARCH, None, False
+    settings, ckpt, duel, foresee = BOUT_SEARCH, None, False, False
     aimed = {"aim": 0.0, "touch": 0.0, "lead": 0.0, "spread": 1.0}
     for tok in spec.split(":")[1:]:
         c, comma, la = tok.partition(",")
@@ -136,6 +152,8 @@ def load_bout_search(spec: str):
             settings = replace(settings, **{_FLAGS[tok]: True})
         elif tok == "duel":
             duel = True
+        elif tok == "foresee":
+            foresee = True
         elif tok.startswith(("aim=", "touch=", "lead=", "spread=")):
             name, _, val = tok.partition("=")
             try:
@@ -151,7 +169,7 @@ def load_bout_search(spec: str):
         elif tok:
             ckpt = tok
     return BoutSearchTracker(load_policy(ckpt), settings, aim=aimed["aim"], duel=duel, aim_spread=aimed["spread"],
-                             touch=aimed["touch"], lead=aimed["lead"])
+                             touch=aimed["touch"], lead=aimed["lead"], foresee=foresee)
 
 
 def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", future: str = "calibrated"):

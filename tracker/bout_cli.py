@@ -67,8 +67,9 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
 
 
 TRACKER_HELP = ("tracking policy checkpoint, 'pd', or 'search[:C,L][:early|full][:heading=W][:aim=W][:touch=W][:lead=W][:spread=F][:duel]"
-                "[:CKPT]' (the policy steered by a run-time search: far fewer falls, 0.03-0.3x real time; "
-                "aim/touch/lead/spread/duel: planned strikes aimed, in rollouts with the opponent; tracker/bout_search.py); "
+                "[:foresee][:CKPT]' (the policy steered by a run-time search: far fewer falls, 0.03-0.3x real time; "
+                "aim/touch/lead/spread/duel: planned strikes aimed, in rollouts with the opponent; foresee: the agents' next actions "
+                "guessed for the look-ahead; tracker/bout_search.py); "
                 "default: the shipped policy")
 FACING_HELP = ("which way a fallen fighter faces when it gets up: towards the opponent (default) or its "
                "fighting direction at the fall (the rule before)")

@@ -77,6 +77,8 @@ class PhysicsBoutResult:
             "realised_hits": float(self.hits.sum()),
             "planned_realised": float(self.planned_realised.sum()),
             "planned_realised_ratio": float(self.planned_realised.sum()) / p if p else None,
+            **({"foreseen_share": float(np.mean([d["foreseen"] for d in self.decisions if "foreseen" in d]))}
+               if any("foreseen" in d for d in self.decisions) else {}),
             "planned_hits_standing": ps,
             "planned_realised_ratio_standing": float(self.planned_standing_realised.sum()) / ps if ps else None,
             "unplanned_hits": float(self.hits.sum() - self.planned_realised.sum()),

@@ -17,7 +17,10 @@ reward; the best offset is played in the bout until the next search.
 Approximations, named: (1) the rollouts leave the opponent out (a one-fighter scene: punches,
 clinches and pushes are not foreseen; they are rare next to falls, which is what the search
 prevents); (2) the look-ahead past a fighter's planned action reads the reference's placeholder
-(the action's last frame held still, tracker.bout) since the next action is not chosen yet; (3)
+(the action's last frame held still, tracker.bout) since the next action is not chosen yet, or,
+with ``foresee`` (nineteenth session), the actions its agent would choose from the coupled state
+predicted at each action's end (PhysicsBout._foresee: a guess, one frame late, rewritten by the
+real decision; measured in bouts: right one time in three, and more falls, tracker/BOUTS.md); (3)
 MuJoCo's warm start and the contacts of the first substep are recomputed in the copy (mj_forward),
 so a rollout of the unchanged policy differs from the bout's own continuation in the last digits
 of the solver. No force acts on any root; the search only chooses PD targets.
@@ -75,7 +78,7 @@ class BoutSearchTracker:
 
     def __init__(self, policy, settings: SearchSettings = BOUT_SEARCH, aim: float = 0.0,
                  aim_sigma_m: float = 0.15, duel: bool = False, aim_spread: float = 1.0, touch: float = 0.0,
-                 lead: float = 0.0) -> None:
+                 lead: float = 0.0, foresee: bool = False) -> None:
         if settings.space != "joints":
             raise ValueError("the bout search steers joint offsets (space='joints')")
         if aim < 0 or aim_sigma_m <= 0 or aim_spread <= 0 or touch < 0 or lead < 0:
@@ -88,6 +91,9 @@ class BoutSearchTracker:
         self.aim_sigma_m = aim_sigma_m
         self.duel = duel
         self.aim_spread = aim_spread            # arm offsets' sigma multiplied by this while aiming
+        # PhysicsBout writes guessed next actions this far past each fighter's current action when
+        # > 0 (its foresight: the agents' peek), instead of holding the action's last frame still
+        self.foresee_steps = settings.segment + settings.lookahead + 2 if foresee else 0
         self.obs_future = policy.obs_future
         # Set by PhysicsBout before every act: True for a fighter that is down (no search for it).
         self.idle: list[bool] | None = None
@@ -103,7 +109,7 @@ class BoutSearchTracker:
                + (f", pelvis lead {self.lead:g}" if self.lead else "")
                + (f", arm offsets x{self.aim_spread:g}" if self.aim_spread != 1 else "") + ")") if self.aiming else ""
         opp = ("the opponent in the rollouts on its plain policy" if self.duel else
-               "opponent left out of the rollouts")
+               "opponent left out of the rollouts") + (", next actions foreseen" if self.foresee_steps else "")
         return (f"bout search ({s.candidates} candidates per {s.segment / 30:.1f} s, {s.lookahead / 30:.1f} s "
                 f"lookahead{s.variants()}{aim}, {opp}) steering {self.policy.describe()}")
 

@@ -262,12 +262,14 @@ class PhysIGAgent:
         self.style = st
 
     def decide(self, ctx) -> int:
-        mt, _, q = self.scores(ctx)
         self.decisions += 1
         self.off_graph += int(self.controller.locate(ctx.obs)[2])
-        if len(q) == 0:
-            return int(ctx.menu[0])
-        return int(mt[int(np.argmax(q)), 0])
+        return self.peek(ctx)
+
+    def peek(self, ctx) -> int:
+        """What decide() answers for ``ctx``, without counting it (it is deterministic)."""
+        mt, _, q = self.scores(ctx)
+        return int(ctx.menu[0]) if len(q) == 0 else int(mt[int(np.argmax(q)), 0])
 
 
 def phys_fighter(graph, library, style, depth: int, model: HitModel | str | None = None,

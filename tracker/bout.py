@@ -25,7 +25,10 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   frame) corrected by the yaw difference between the physical and the reference pelvis. The next
   action's reference is placed at that predicted pose (ActionLibrary.sequence_motion, blended over
   ``blend_frames`` from the previous action's end pose), so the reference is re-anchored on the
-  body at every action: root drift never accumulates across actions.
+  body at every action: root drift never accumulates across actions. Past the current action's
+  end the buffer holds that action's last frame still, or, for a search tracker that asks for it
+  (``foresee_steps``), the actions the agent would choose next (``_foresee``: guesses for the
+  search's rollouts only; measured in tracker/BOUTS.md, nineteenth session).
 * Coupled state for the agent (igraph_fight.controller.Observation): r, theta_self, theta_other
   from the predicted poses, M_self the finishing action, M_other / F_other the opponent's action
   and frame at that instant, mask_other the opponent's strikes already resolved (planned or hit)

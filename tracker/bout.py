@@ -114,7 +114,8 @@ class PhysicsBout:
         self.fms = setup.scene.fighters
         self.judge = HitJudge(self.model, self.fms, self.lib, config)
         self._trace_tables = None
-        self._foresight = int(getattr(tracker, "foresee_steps", 0) or 0) > 0
+        # foresight (``_foresee``): how far past a fighter's current action its agent's next actions are guessed
+        self._foresee_steps = int(getattr(tracker, "foresee_steps", 0) or 0)
         self.schedule: list[tuple[float, Callable[[], None], str]] = []
         self.hook_gap_m = 0.5
 
@@ -191,7 +192,7 @@ class PhysicsBout:
             _, cb, note = self._pending.pop(0)
             cb()
             self.notes.append({"t": round(env.t / 30.0, 4), "note": note})
-        if self._foresight:                         # guesses refreshed from the physical state now
+        if self._foresee_steps:                     # guesses refreshed from the physical state now
             for k in (0, 1):
                 self._foresee(k, env.t, record=False)
         if hasattr(self.tracker, "idle"):          # a search tracker skips fallen fighters
@@ -392,36 +393,20 @@ class PhysicsBout:
         decision and reset (``record``: the first guess is kept, and the decision it guessed logs
         ``foreseen``, whether it was right) and, from the physical state then, before every control
         step's tracking (so the guesses the search reads are at most one step old)."""
-        from igraph_fight.controller import Observation
-        from igraph_fight.state import WorldState, to_sample
-        from igraph_fight import sim as ksim
-        horizon = int(getattr(self.tracker, "foresee_steps", 0) or 0)
         f = self.F[k]
         agent = self.agents[k]
         if record:
             self._guess[k] = None
-        if horizon <= 0 or f.down or not hasattr(agent, "peek"):
+        if not self._foresee_steps or f.down or not hasattr(agent, "peek"):
             return
-        o = 1 - k
         a_prev = f.segments[-1].action
         t_end = f.t_dec_end
-        stop = min(f.t_dec_end + horizon, self.T - 2)
+        stop = min(f.t_dec_end + self._foresee_steps, self.T - 2)
         while t_end < stop:
-            xs, zs, hs = np.zeros(2), np.zeros(2), np.zeros(2)
-            for j in (k, o):
-                xs[j], zs[j], hs[j] = self.predicted_pose(j, t, t_end)
-            ao, fo, io = self.F[o].action_frame(t_end, self.nf)
-            acts = np.zeros(2, dtype=np.int64)
-            frs = np.zeros(2, dtype=np.int64)
-            acts[k], frs[k] = a_prev, int(self.nf[a_prev]) - 1
-            acts[o], frs[o] = ao, fo
-            res = np.zeros(2, dtype=np.int64)
-            res[o] = self.F[o].resolved.get(io, 0)
-            world = WorldState(xs, zs, hs, acts, frs, res)
-            si, sf = to_sample(self.tables, world, k)
-            obs = Observation(float(sf[ksim.SF_R]), float(sf[ksim.SF_TH_SELF]), float(sf[ksim.SF_TH_OTHER]),
-                              int(si[ksim.SI_MSELF]), int(si[ksim.SI_MOTHER]), int(si[ksim.SI_FOTHER]),
-                              int(si[ksim.SI_MASK]))
+            world = self.world_at(t_end, t)
+            # the guessed action at its last frame (the segments hold only real actions)
+            world.action[k], world.frame[k], world.resolved[k] = a_prev, int(self.nf[a_prev]) - 1, 0
+            obs, _, _ = self._observation(world, k)
             menu = self.tables.menu(a_prev)
             if len(menu) == 0:
                 return
@@ -431,17 +416,27 @@ class PhysicsBout:
                 return
             if record and self._guess[k] is None:
                 self._guess[k] = (t_end, a)
-            self._write_segment(k, t_end + 1, a, a_prev, (float(xs[k]), float(zs[k]), float(hs[k])), -1)
+            pose = (float(world.x[k]), float(world.z[k]), float(world.heading[k]))
+            self._write_segment(k, t_end + 1, a, a_prev, pose, -1)
             t_end = t_end + int(self.nf[a])
             a_prev = a
+
+    def _observation(self, world, k: int):
+        """(igraph_fight.controller.Observation, sample ints, sample floats) of ``world`` seen by fighter k."""
+        from igraph_fight.controller import Observation
+        from igraph_fight.state import to_sample
+        from igraph_fight import sim as ksim
+        si, sf = to_sample(self.tables, world, k)
+        obs = Observation(float(sf[ksim.SF_R]), float(sf[ksim.SF_TH_SELF]), float(sf[ksim.SF_TH_OTHER]),
+                          int(si[ksim.SI_MSELF]), int(si[ksim.SI_MOTHER]), int(si[ksim.SI_FOTHER]),
+                          int(si[ksim.SI_MASK]))
+        return obs, si, sf
 
     # ------------------------------------------------------------------ decisions
     def _decide_due(self, t: int, initial_world=None) -> bool:
         """Ask every fighter whose action ends within ``lead`` steps for its next action; then
         predict the planned hits of each new decision instant. Returns True if a reference changed."""
-        from igraph_fight.state import to_sample
         from igraph_fight import sim as ksim
-        from igraph_fight.controller import Observation
         due = [k for k in range(2) if not self.F[k].down and t >= self.F[k].t_dec_end - self.lead
                and self.F[k].t_dec_end < self.n_steps + self.lead + 1]
         if not due:
@@ -453,10 +448,7 @@ class PhysicsBout:
             f = self.F[k]
             t_e = f.t_dec_end
             world = self.world_at(t_e, t, initial_world)
-            si, sf = to_sample(self.tables, world, k)
-            obs = Observation(float(sf[ksim.SF_R]), float(sf[ksim.SF_TH_SELF]), float(sf[ksim.SF_TH_OTHER]),
-                              int(si[ksim.SI_MSELF]), int(si[ksim.SI_MOTHER]), int(si[ksim.SI_FOTHER]),
-                              int(si[ksim.SI_MASK]))
+            obs, si, sf = self._observation(world, k)
             menu = self.tables.menu(int(world.action[k]))
             ctx = DecisionContext(k, t_e / 30.0, obs, menu, world,
                                   self.features(k) if initial_world is None else np.zeros(14), dict(f.reward),

@@ -59,6 +59,7 @@ class PhysicsBoutResult:
         for d in self.decisions:
             kinds[d["player"]][d["kind"]] = kinds[d["player"]].get(d["kind"], 0) + 1
         share = [{k: v / max(sum(c.values()), 1) for k, v in sorted(c.items())} for c in kinds]
+        foreseen = [d["foreseen"] for d in self.decisions if "foreseen" in d]   # foresight's guesses, right or not
         return {
             "a": self.names[0], "b": self.names[1], "seconds": self.seconds, "seed": self.seed, "physics": True,
             "hits_a": float(self.hits[0]), "hits_b": float(self.hits[1]), "score": self.score,
@@ -77,8 +78,7 @@ class PhysicsBoutResult:
             "realised_hits": float(self.hits.sum()),
             "planned_realised": float(self.planned_realised.sum()),
             "planned_realised_ratio": float(self.planned_realised.sum()) / p if p else None,
-            **({"foreseen_share": float(np.mean([d["foreseen"] for d in self.decisions if "foreseen" in d]))}
-               if any("foreseen" in d for d in self.decisions) else {}),
+            **({"foreseen_share": float(np.mean(foreseen))} if foreseen else {}),
             "planned_hits_standing": ps,
             "planned_realised_ratio_standing": float(self.planned_standing_realised.sum()) / ps if ps else None,
             "unplanned_hits": float(self.hits.sum() - self.planned_realised.sum()),

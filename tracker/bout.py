@@ -708,6 +708,8 @@ class PhysicsBout:
             d = {"name": ag.name}
             if hasattr(ag, "off_graph"):
                 d.update(decisions=ag.decisions, off_graph=ag.off_graph)
+            if hasattr(ag, "closing"):
+                d["closing"] = ag.closing       # decisions taken by the closing rule (ClosingAgent)
             info.append(d)
         return PhysicsBoutResult(
             (self.agents[0].name, self.agents[1].name), self.sim_s, seed, hits, planned, pr, ps, psr, falls,

@@ -98,6 +98,45 @@ class MenuAgent:
         return int(rng.choice(ctx.menu))
 
 
+class ClosingAgent:
+    """An agent that closes in by a geometric rule (igraph_fight.closing.ClosingRule) while the
+    fighter faces away from its opponent or stands out of range, and lets ``inner`` decide once it
+    is engaged. Counts the decisions the rule took (``closing``); other attributes (controller,
+    decisions, off_graph, set_style) are the inner agent's."""
+
+    def __init__(self, inner, library, rule=None) -> None:
+        from igraph_fight.closing import ClosingRule
+        self.inner = inner
+        self.library = library
+        self.rule = rule if rule is not None else ClosingRule()
+        self.name = f"{inner.name}+close"
+        self.closing = 0
+
+    def __getattr__(self, name: str):
+        if name == "inner":                   # not set yet (copy, pickle): no recursion
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    def reset(self, bout, k, rng) -> None:
+        self.closing = 0
+        self.inner.reset(bout, k, rng)
+
+    def _rule(self, ctx: DecisionContext) -> int | None:
+        return self.rule.choose(ctx.menu, float(ctx.obs.r), float(ctx.obs.theta_self), self.library)
+
+    def decide(self, ctx: DecisionContext) -> int:
+        a = self._rule(ctx)
+        if a is None:
+            return int(self.inner.decide(ctx))
+        self.closing += 1
+        return a
+
+    def peek(self, ctx: DecisionContext) -> int:
+        """What decide() would answer, without side effects (the inner agent's peek when engaged)."""
+        a = self._rule(ctx)
+        return int(self.inner.peek(ctx)) if a is None else a
+
+
 def load_tracker(spec: str | None = None):
     """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
     (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
@@ -177,17 +216,44 @@ def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", 
     (its NPCController's ``first_ply``); ``STYLE+phys`` or ``STYLE+phys:MODEL`` the IG fighter
     whose first ply uses physically measured hit odds (tracker.hit_model; default the shipped
     model; later plies by ``future``); ``rl`` or ``rl:CKPT`` the physics RL baseline
-    (tracker.physics_rl)."""
+    (tracker.physics_rl). ``+close`` or ``+close=R,THETA`` after a style (with or without +phys)
+    wraps the fighter in a ClosingAgent (igraph_fight.closing.ClosingRule: engaged within R metres
+    and THETA radians of facing; defaults 1.6 m, 1.0 rad)."""
     if spec == "rl" or spec.startswith("rl:"):
         from .physics_rl import load_rl_agent
         return load_rl_agent(spec[3:] or None, library)
     from igraph_fight.controller import NPCController
-    style, plus, opt = spec.partition("+")
-    if plus:
-        kind, _, model = opt.partition(":")
-        if kind != "phys":
-            raise ValueError(f"unknown fighter option {opt!r} in {spec!r} (STYLE+phys[:MODEL])")
+    style, *opts = spec.split("+")
+    phys, close = None, None
+    for opt in opts:
+        kind, _, arg = opt.partition(":" if opt.startswith("phys") else "=")
+        if kind == "phys" and phys is None:
+            phys = arg
+        elif kind == "close" and close is None:
+            close = _closing_rule(arg, spec)
+        else:
+            raise ValueError(f"unknown or repeated fighter option {opt!r} in {spec!r} "
+                             "(STYLE+phys[:MODEL], STYLE+close[=R,THETA] or both)")
+    if phys is not None:
         from .hit_model import phys_fighter
-        return phys_fighter(graph, library, style, depth, model or None, future)
-    npc = NPCController(graph, library, style=spec, depth=depth, first_ply=first_ply)
-    return IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
+        ag = phys_fighter(graph, library, style, depth, phys or None, future)
+    else:
+        npc = NPCController(graph, library, style=style, depth=depth, first_ply=first_ply)
+        ag = IGAgent(npc, f"{npc.style}({depth}{'' if first_ply == 'table' else ', ' + first_ply})")
+    if close is None:
+        return ag
+    lib = library if library is not None else ag.controller.library
+    return ClosingAgent(ag, lib, close)
+
+
+def _closing_rule(arg: str, spec: str):
+    """``close`` / ``close=R,THETA`` (metres, radians) -> igraph_fight.closing.ClosingRule."""
+    from igraph_fight.closing import ClosingRule
+    if not arg:
+        return ClosingRule()
+    try:
+        r, th = (float(v) for v in arg.split(","))
+        return ClosingRule(engage_r_m=r, engage_theta_rad=th)
+    except ValueError as e:
+        raise ValueError(f"fighter {spec!r}: close=R,THETA needs a distance in metres and an angle in radians "
+                         f"({e})") from None

@@ -587,7 +587,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--library", default=None)
     e.add_argument("--rl", default=None)
     e.add_argument("--tracker", default=None)
-    e.add_argument("--styles", default="infighter,outboxer")
+    e.add_argument("--styles", default="infighter,outboxer",
+                   help="comma-separated IG styles; STYLE+close: closes in by a geometric rule until engaged")
     e.add_argument("--bouts", type=int, default=10)
     e.add_argument("--seconds", type=float, default=60.0)
     e.add_argument("--depth", type=int, default=5)

@@ -1,0 +1,124 @@
+"""The closing rule (igraph_fight.closing) in kinematic bouts: score, hits, the share of fighter A's
+decisions facing more than 1 rad away from the opponent and the mean distance, for the policy-table
+fighters with and without the rule on A (the same seeds, so the difference is paired); and how
+long the rule takes to engage a fighter from 3 m facing away, the opponent standing still
+(tracker/BOUTS.md, twentieth session).
+
+    python benchmarks/closing_kinematic.py --graph G.igz --a infighter --b outboxer --bouts 40
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+
+class _Closing:
+    """A game-API agent: the closing rule while disengaged, ``inner`` otherwise."""
+
+    def __init__(self, inner, rule, library) -> None:
+        self.inner, self.rule, self.library = inner, rule, library
+
+    def reset(self, game, player, rng) -> None:
+        self.inner.reset(game, player, rng)
+
+    def step(self, state, player: int) -> int:
+        from igraph_fight.controller import observe
+        o = observe(state, player)
+        lib = self.library
+        menu = lib.next_ids[lib.next_offsets[o.m_self]:lib.next_offsets[o.m_self + 1]]
+        a = self.rule.choose(menu, o.r, o.theta_self, lib)
+        return self.inner.step(state, player) if a is None else a
+
+
+def _bouts(game, agents, seeds, seconds: float) -> dict:
+    scores, away, dist, hits = [], [], [], np.zeros(2)
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        s = game.new_initial_state(rng)
+        s.game = game
+        for p, ag in enumerate(agents):
+            ag.reset(game, p, rng)
+        th = []
+        while s.time_s < seconds:
+            p = s.current_player()
+            if p < 0:
+                break
+            if p == 0:
+                r, ts, _ = s.relative(0)
+                th.append(abs(ts))
+                dist.append(r)
+            s.apply_action(int(agents[p].step(s, p)))
+        scores.append(float(s.returns()[0]))
+        away.append(float(np.mean(np.array(th) > 1.0)))
+        hits += np.array(s.hits, dtype=float)
+    return {"scores": np.array(scores), "away": float(np.mean(away)), "r": float(np.mean(dist)), "hits": hits}
+
+
+def _ci(x: np.ndarray) -> float:
+    return float(1.96 * x.std(ddof=1) / np.sqrt(len(x))) if len(x) > 1 else float("nan")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--graph", required=True)
+    ap.add_argument("--a", default="infighter")
+    ap.add_argument("--b", default="outboxer")
+    ap.add_argument("--bouts", type=int, default=40)
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--seed0", type=int, default=1)
+    args = ap.parse_args(argv)
+
+    from igraph_fight.agents import IGAgent
+    from igraph_fight.closing import ClosingRule, end_geometry
+    from igraph_fight.controller import NPCController
+    from igraph_fight.game import FightGame, GameConfig
+    from igraph_fight.graph import load_graph
+    g = load_graph(args.graph)
+    lib = g.load_library()
+    rule = ClosingRule()
+    ca = NPCController(g, lib, style=args.a, depth=5)
+    cb = NPCController(g, lib, style=args.b, depth=5)
+    game = FightGame(lib, GameConfig(max_seconds=args.seconds, sim=g.sim_params()), tables=ca.tables)
+    seeds = range(args.seed0, args.seed0 + args.bouts)
+    rows = {}
+    for name, a in (("policy table", IGAgent(ca, "a")), ("closing rule, then the table", _Closing(IGAgent(ca, "a"), rule, lib))):
+        t0 = time.perf_counter()
+        rows[name] = _bouts(game, [a, IGAgent(cb, "b")], seeds, args.seconds)
+        rows[name]["wall"] = time.perf_counter() - t0
+    print(f"{args.a} (A) vs {args.b}, {args.bouts} kinematic bouts of {args.seconds:.0f} s, seeds {seeds.start}-{seeds.stop - 1}")
+    print("| A | score per bout (95%) | hits A - B | A's decisions facing > 1 rad away | mean distance |")
+    print("|---|---|---|---|---|")
+    for name, r in rows.items():
+        print(f"| {name} | {r['scores'].mean():+.2f} ({_ci(r['scores']):.2f}) | {r['hits'][0]:.0f} - {r['hits'][1]:.0f} | "
+              f"{r['away']:.0%} | {r['r']:.2f} m |")
+    d = rows["closing rule, then the table"]["scores"] - rows["policy table"]["scores"]
+    print(f"paired difference {d.mean():+.2f} (95% {d.mean() - _ci(d):+.2f} .. {d.mean() + _ci(d):+.2f})")
+
+    # engaging from 3 m facing away, the opponent standing still, from every action
+    times = []
+    for m0 in range(lib.n_actions):
+        for th0 in (-2.8, -1.5, 1.5, 2.8):
+            m, r, th, t = m0, 3.0, th0, 0.0
+            while t < 60.0:
+                a = rule.choose(lib.next_ids[lib.next_offsets[m]:lib.next_offsets[m + 1]], r, th, lib)
+                if a is None:
+                    break
+                r1, th1 = end_geometry(r, th, lib.dx[[a]], lib.dz[[a]], lib.dheading[[a]])
+                r, th, m, t = float(r1[0]), float(th1[0]), a, t + float(lib.duration[a])
+            times.append(t)
+    times = np.array(times)
+    print(f"seconds to engage from 3 m, |theta| 1.5 or 2.8 rad, {len(times)} starts: mean {times.mean():.1f}, "
+          f"95th percentile {np.percentile(times, 95):.1f}, max {times.max():.1f}")
+    ca.close()
+    cb.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,99 @@
+"""The closing rule (igraph_fight.closing) and its physics-bout wrapper (tracker.bout_agents.ClosingAgent)."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from igraph_fight.closing import ClosingRule, end_geometry
+from igraph_fight.state import relative
+
+
+def _menu(lib, m: int) -> np.ndarray:
+    return lib.next_ids[lib.next_offsets[m]:lib.next_offsets[m + 1]]
+
+
+@pytest.mark.realdata
+def test_end_geometry_is_the_coupled_state_after_the_action_placed_as_the_library_places_it(boxing_library):
+    lib = boxing_library
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        a = int(rng.integers(lib.n_actions))
+        x, z, h = rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)
+        ox, oz = rng.uniform(-2, 2), rng.uniform(-2, 2)
+        before = SimpleNamespace(x=np.array([x, ox]), z=np.array([z, oz]), heading=np.array([h, 0.0]))
+        r, th, _ = relative(before, 0)
+        # the action continues from (x, z, h) as ActionLibrary.sequence_motion places it
+        c, s = np.cos(h), np.sin(h)
+        after = SimpleNamespace(x=np.array([x + c * lib.dx[a] + s * lib.dz[a], ox]),
+                                z=np.array([z - s * lib.dx[a] + c * lib.dz[a], oz]),
+                                heading=np.array([h + lib.dheading[a], 0.0]))
+        r_want, th_want, _ = relative(after, 0)
+        r1, th1 = end_geometry(r, th, lib.dx[[a]], lib.dz[[a]], lib.dheading[[a]])
+        assert r1[0] == pytest.approx(r_want, abs=1e-9)
+        assert abs((th1[0] - th_want + np.pi) % (2 * np.pi) - np.pi) < 1e-9
+
+
+@pytest.mark.realdata
+def test_the_rule_leaves_an_engaged_fighter_to_the_graph_and_brings_a_far_one_round_and_in(boxing_library):
+    lib = boxing_library
+    rule = ClosingRule()
+    assert rule.choose(_menu(lib, 0), 1.2, 0.3, lib) is None              # engaged: the graph decides
+    with pytest.raises(ValueError, match="engage_r_m"):
+        ClosingRule(engage_r_m=0.0)
+    # from every action, 3 m away and facing away either way, the opponent standing still: the
+    # rule's actions played one after another engage the fighter (a one-action greedy rule,
+    # ClosingRule(depth=1), gets caught in the graph's loops and fails from some of these starts)
+    times = []
+    for m0 in range(lib.n_actions):
+        for th0 in (-2.8, 2.8):
+            m, r, th, t = m0, 3.0, th0, 0.0
+            while t < 30.0:
+                a = rule.choose(_menu(lib, m), r, th, lib)
+                if a is None:
+                    break
+                assert a in _menu(lib, m)                                  # always a legal action
+                r1, th1 = end_geometry(r, th, lib.dx[[a]], lib.dz[[a]], lib.dheading[[a]])
+                r, th, m, t = float(r1[0]), float(th1[0]), a, t + float(lib.duration[a])
+            assert rule.engaged(r, th), f"not engaged after {t:.1f} s from action {m0}, theta {th0}"
+            times.append(t)
+    assert np.mean(times) < 10.0 and max(times) < 20.0                    # measured: 8.4 s, 17.0 s
+
+
+@pytest.mark.realdata
+def test_closing_agent_takes_the_rule_when_disengaged_and_the_inner_agent_otherwise(boxing_library):
+    from igraph_fight.controller import Observation
+    from tracker.bout_agents import ClosingAgent, DecisionContext, MenuAgent
+
+    lib = boxing_library
+    inner = MenuAgent([], "inner")
+    inner.reset(None, 0, np.random.default_rng(1))
+    agent = ClosingAgent(inner, lib)
+    agent.reset(None, 0, np.random.default_rng(1))
+    menu = _menu(lib, 0)
+
+    def ctx(r, th):
+        obs = Observation(r=r, theta_self=th, theta_other=0.0, m_self=0, m_other=0, f_other=0)
+        return DecisionContext(0, 0.0, obs, menu, None, np.zeros(1), {}, 0)
+
+    far = ctx(3.0, 2.5)
+    want = ClosingRule().choose(menu, 3.0, 2.5, lib)
+    assert agent.peek(far) == want and agent.closing == 0                  # peek counts nothing
+    assert agent.decide(far) == want and agent.closing == 1
+    near = ctx(1.0, 0.1)
+    guess = agent.peek(near)                                              # the inner agent's peek
+    assert agent.decide(near) == guess and agent.closing == 1
+    assert agent.name == "inner+close"
+
+
+@pytest.mark.realdata
+def test_make_agent_reads_the_close_option(boxing_library, tiny_graph_file):
+    from tracker.bout_agents import ClosingAgent, make_agent
+    ag = make_agent("infighter+close=1.4,0.8", str(tiny_graph_file), boxing_library, 2)
+    assert isinstance(ag, ClosingAgent) and ag.rule == ClosingRule(engage_r_m=1.4, engage_theta_rad=0.8)
+    assert ag.controller.style == "infighter"                              # the inner fighter's attributes
+    ag.controller.close()
+    for bad in ("infighter+close=near", "infighter+close+close"):
+        with pytest.raises(ValueError, match="close"):
+            make_agent(bad, str(tiny_graph_file), boxing_library, 2)

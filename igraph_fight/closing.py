@@ -112,14 +112,15 @@ class ClosingRule:
         for level in range(self.depth):
             done = self.engaged(rr, th)
             last = level == self.depth - 1
-            cost = np.where(done, t, t + self._rest(rr, th) if last else np.inf)
+            leaf = last | (library.next_offsets[act + 1] == library.next_offsets[act])   # or a dead end
+            cost = np.where(done, t, np.where(leaf, t + self._rest(rr, th), np.inf))
             order = np.argsort(cost, kind="stable")          # the first node per first action is its best
             f, first_at = np.unique(fi[order], return_index=True)
             c, node = cost[order][first_at], order[first_at]
             better = c < best_cost[f]
             best_cost[f[better]] = c[better]
             best_node[f[better]] = np.column_stack([np.full(better.sum(), level), node[better]])
-            go = np.flatnonzero(~done)
+            go = np.flatnonzero(~done & ~leaf)
             if last or len(go) == 0:
                 break
             a = act[go]

@@ -30,9 +30,7 @@ class _Closing:
     def step(self, state, player: int) -> int:
         from igraph_fight.controller import observe
         o = observe(state, player)
-        lib = self.library
-        menu = lib.next_ids[lib.next_offsets[o.m_self]:lib.next_offsets[o.m_self + 1]]
-        a = self.rule.choose(menu, o.r, o.theta_self, lib)
+        a = self.rule.choose(self.library.next(o.m_self), o.r, o.theta_self, self.library)
         return self.inner.step(state, player) if a is None else a
 
 
@@ -75,7 +73,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from igraph_fight.agents import IGAgent
-    from igraph_fight.closing import ClosingRule, end_geometry
+    from igraph_fight.closing import ClosingRule
     from igraph_fight.controller import NPCController
     from igraph_fight.game import FightGame, GameConfig
     from igraph_fight.graph import load_graph
@@ -101,17 +99,7 @@ def main(argv=None) -> int:
     print(f"paired difference {d.mean():+.2f} (95% {d.mean() - _ci(d):+.2f} .. {d.mean() + _ci(d):+.2f})")
 
     # engaging from 3 m facing away, the opponent standing still, from every action
-    times = []
-    for m0 in range(lib.n_actions):
-        for th0 in (-2.8, -1.5, 1.5, 2.8):
-            m, r, th, t = m0, 3.0, th0, 0.0
-            while t < 60.0:
-                a = rule.choose(lib.next_ids[lib.next_offsets[m]:lib.next_offsets[m + 1]], r, th, lib)
-                if a is None:
-                    break
-                r1, th1 = end_geometry(r, th, lib.dx[[a]], lib.dz[[a]], lib.dheading[[a]])
-                r, th, m, t = float(r1[0]), float(th1[0]), a, t + float(lib.duration[a])
-            times.append(t)
+    times = [rule.rollout(lib, m0, 3.0, th0)[0] for m0 in range(lib.n_actions) for th0 in (-2.8, -1.5, 1.5, 2.8)]
     times = np.array(times)
     print(f"seconds to engage from 3 m, |theta| 1.5 or 2.8 rad, {len(times)} starts: mean {times.mean():.1f}, "
           f"95th percentile {np.percentile(times, 95):.1f}, max {times.max():.1f}")

@@ -147,3 +147,19 @@ class ClosingRule:
         """The first action of ``plan`` (None when the fighter is engaged or the menu is empty)."""
         p = self.plan(menu, r, theta_self, library)
         return p[0] if p else None
+
+    def rollout(self, library, m: int, r: float, theta_self: float,
+                max_s: float = 60.0) -> tuple[float, float, float, list[int]]:
+        """Play the rule's answers one after another from the end of action ``m`` at (r m,
+        theta_self rad), the opponent standing still, until the fighter is engaged or ``max_s``
+        seconds have been played: (seconds played, r, theta_self, actions played)."""
+        t, played = 0.0, []
+        while t < max_s:
+            a = self.choose(library.next(m), r, theta_self, library)
+            if a is None:
+                break
+            r1, th1 = end_geometry(r, theta_self, library.dx[[a]], library.dz[[a]], library.dheading[[a]])
+            r, theta_self, m = float(r1[0]), float(th1[0]), a
+            t += float(library.duration[a])
+            played.append(a)
+        return t, r, theta_self, played

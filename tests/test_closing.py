@@ -10,10 +10,6 @@ from igraph_fight.closing import ClosingRule, end_geometry
 from igraph_fight.state import relative
 
 
-def _menu(lib, m: int) -> np.ndarray:
-    return lib.next_ids[lib.next_offsets[m]:lib.next_offsets[m + 1]]
-
-
 @pytest.mark.realdata
 def test_end_geometry_is_the_coupled_state_after_the_action_placed_as_the_library_places_it(boxing_library):
     lib = boxing_library
@@ -39,7 +35,7 @@ def test_end_geometry_is_the_coupled_state_after_the_action_placed_as_the_librar
 def test_the_rule_leaves_an_engaged_fighter_to_the_graph_and_brings_a_far_one_round_and_in(boxing_library):
     lib = boxing_library
     rule = ClosingRule()
-    assert rule.choose(_menu(lib, 0), 1.2, 0.3, lib) is None              # engaged: the graph decides
+    assert rule.choose(lib.next(0), 1.2, 0.3, lib) is None              # engaged: the graph decides
     with pytest.raises(ValueError, match="engage_r_m"):
         ClosingRule(engage_r_m=0.0)
     # from every action, 3 m away and facing away either way, the opponent standing still: the
@@ -48,15 +44,10 @@ def test_the_rule_leaves_an_engaged_fighter_to_the_graph_and_brings_a_far_one_ro
     times = []
     for m0 in range(lib.n_actions):
         for th0 in (-2.8, 2.8):
-            m, r, th, t = m0, 3.0, th0, 0.0
-            while t < 30.0:
-                a = rule.choose(_menu(lib, m), r, th, lib)
-                if a is None:
-                    break
-                assert a in _menu(lib, m)                                  # always a legal action
-                r1, th1 = end_geometry(r, th, lib.dx[[a]], lib.dz[[a]], lib.dheading[[a]])
-                r, th, m, t = float(r1[0]), float(th1[0]), a, t + float(lib.duration[a])
+            t, r, th, played = rule.rollout(lib, m0, 3.0, th0, max_s=30.0)
             assert rule.engaged(r, th), f"not engaged after {t:.1f} s from action {m0}, theta {th0}"
+            for prev, a in zip([m0, *played], played):
+                assert a in lib.next(prev)                                  # always a legal action
             times.append(t)
     assert np.mean(times) < 10.0 and max(times) < 20.0                    # measured: 8.4 s, 17.0 s
 
@@ -71,7 +62,7 @@ def test_closing_agent_takes_the_rule_when_disengaged_and_the_inner_agent_otherw
     inner.reset(None, 0, np.random.default_rng(1))
     agent = ClosingAgent(inner, lib)
     agent.reset(None, 0, np.random.default_rng(1))
-    menu = _menu(lib, 0)
+    menu = lib.next(0)
 
     def ctx(r, th):
         obs = Observation(r=r, theta_self=th, theta_other=0.0, m_self=0, m_other=0, f_other=0)

@@ -4,7 +4,10 @@ fighters with and without the rule on A (the same seeds, so the difference is pa
 long the rule takes to engage a fighter from 3 m facing away, the opponent standing still
 (tracker/BOUTS.md, twentieth session).
 
-    python benchmarks/closing_kinematic.py --graph G.igz --a infighter --b outboxer --bouts 40
+    python benchmarks/closing_kinematic.py --graph G.igz --a infighter --b outboxer --bouts 40 [--both] [--avoid 7,60]
+
+--both adds a row with the rule on both fighters (as in the physics bouts `--a infighter+close --b
+outboxer+close`); --avoid gives the rule's ClosingRule.avoid (library ids it does not launch).
 """
 from __future__ import annotations
 
@@ -70,6 +73,8 @@ def main(argv=None) -> int:
     ap.add_argument("--bouts", type=int, default=40)
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--seed0", type=int, default=1)
+    ap.add_argument("--both", action="store_true", help="also a row with the rule on both fighters")
+    ap.add_argument("--avoid", default="", help="comma-separated library ids the rule does not launch")
     args = ap.parse_args(argv)
 
     from igraph_fight.agents import IGAgent
@@ -79,15 +84,19 @@ def main(argv=None) -> int:
     from igraph_fight.graph import load_graph
     g = load_graph(args.graph)
     lib = g.load_library()
-    rule = ClosingRule()
+    rule = ClosingRule(avoid=tuple(int(v) for v in args.avoid.split(",") if v))
     ca = NPCController(g, lib, style=args.a, depth=5)
     cb = NPCController(g, lib, style=args.b, depth=5)
     game = FightGame(lib, GameConfig(max_seconds=args.seconds, sim=g.sim_params()), tables=ca.tables)
     seeds = range(args.seed0, args.seed0 + args.bouts)
     rows = {}
-    for name, a in (("policy table", IGAgent(ca, "a")), ("closing rule, then the table", _Closing(IGAgent(ca, "a"), rule, lib))):
+    runs = [("policy table", IGAgent(ca, "a"), IGAgent(cb, "b")),
+            ("closing rule, then the table", _Closing(IGAgent(ca, "a"), rule, lib), IGAgent(cb, "b"))]
+    if args.both:
+        runs.append(("the rule on both fighters", _Closing(IGAgent(ca, "a"), rule, lib), _Closing(IGAgent(cb, "b"), rule, lib)))
+    for name, a, b in runs:
         t0 = time.perf_counter()
-        rows[name] = _bouts(game, [a, IGAgent(cb, "b")], seeds, args.seconds)
+        rows[name] = _bouts(game, [a, b], seeds, args.seconds)
         rows[name]["wall"] = time.perf_counter() - t0
     print(f"{args.a} (A) vs {args.b}, {args.bouts} kinematic bouts of {args.seconds:.0f} s, seeds {seeds.start}-{seeds.stop - 1}")
     print("| A | score per bout (95%) | hits A - B | A's decisions facing > 1 rad away | mean distance |")

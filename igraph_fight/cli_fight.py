@@ -12,8 +12,8 @@ def register(sub) -> None:
     p.add_argument("--graph", required=True, help="Interaction Graph file (.igz)")
     p.add_argument("--library", default=None, help="action library (default: the one embedded in the graph)")
     p.add_argument("--a", default="infighter", help="style of fighter A: preset name or style file (default infighter); "
-                   "physics bouts also take STYLE+phys[:MODEL], STYLE+close[=R,THETA] (turn and close in by a geometric rule "
-                   "until engaged: igraph_fight.closing), both, and rl[:CKPT]")
+                   "physics bouts also take STYLE+phys[:MODEL], STYLE+close[=R,THETA][:avoid=A,B,...] (turn and close in "
+                   "by a geometric rule until engaged: igraph_fight.closing), both, and rl[:CKPT]")
     p.add_argument("--b", default="outboxer", help="style of fighter B (default outboxer)")
     p.add_argument("--depth-a", type=int, default=5, help="min-max depth of A (default 5)")
     p.add_argument("--depth-b", type=int, default=5, help="min-max depth of B (default 5)")

@@ -67,7 +67,10 @@ class ClosingRule:
     """When the Interaction Graph is left to decide and how a fighter closes in otherwise (module
     docstring). engage_r_m: metres; engage_theta_rad: radians; depth: actions searched ahead;
     turn_rad_s, approach_m_s: the estimate's turning (rad/s) and approach (m/s) speeds; tie_s:
-    first actions whose best sequences engage within this many seconds of the best count as tied."""
+    first actions whose best sequences engage within this many seconds of the best count as tied;
+    avoid: library ids the rule does not launch (unless the menu holds nothing else; the graph still
+    may, and the look-ahead still passes through them): actions after which the physics fighters fell
+    often while closing in (``python -m tracker.fall_odds``)."""
 
     engage_r_m: float = 1.6
     engage_theta_rad: float = 1.0
@@ -75,6 +78,7 @@ class ClosingRule:
     turn_rad_s: float = 0.4
     approach_m_s: float = 0.1
     tie_s: float = 1.0
+    avoid: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.engage_r_m > 0 or not 0 < self.engage_theta_rad <= np.pi:
@@ -101,6 +105,9 @@ class ClosingRule:
         menu = np.asarray(menu, dtype=np.int64)
         if len(menu) == 0 or self.engaged(r, theta_self):
             return []
+        if self.avoid:                                     # not launched by the rule, unless nothing else is legal
+            keep = menu[~np.isin(menu, np.asarray(self.avoid, dtype=np.int64))]
+            menu = keep if len(keep) else menu
         dur = np.asarray(library.duration, dtype=np.float64)
         rr, th = end_geometry(r, theta_self, library.dx[menu], library.dz[menu], library.dheading[menu])
         # progress of each first action: estimated seconds to engage it saves per second it lasts

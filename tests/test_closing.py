@@ -1,6 +1,7 @@
 """The closing rule (igraph_fight.closing) and its physics-bout wrapper (tracker.bout_agents.ClosingAgent)."""
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -79,12 +80,67 @@ def test_closing_agent_takes_the_rule_when_disengaged_and_the_inner_agent_otherw
 
 
 @pytest.mark.realdata
-def test_make_agent_reads_the_close_option(boxing_library, tiny_graph_file):
+def test_make_agent_reads_the_close_option(boxing_library, tiny_graph_file, tmp_path):
+    import planner.presets
     from tracker.bout_agents import ClosingAgent, make_agent
     ag = make_agent("infighter+close=1.4,0.8", str(tiny_graph_file), boxing_library, 2)
     assert isinstance(ag, ClosingAgent) and ag.rule == ClosingRule(engage_r_m=1.4, engage_theta_rad=0.8)
     assert ag.controller.style == "infighter"                              # the inner fighter's attributes
     ag.controller.close()
-    for bad in ("infighter+close=near", "infighter+close+close"):
+    styled = tmp_path / "my+infighter.toml"                                # a "+" inside a style file's path
+    styled.write_text((Path(planner.presets.__file__).parent / "infighter.toml").read_text())
+    ag = make_agent(f"{styled}+close", str(tiny_graph_file), boxing_library, 2)
+    assert isinstance(ag, ClosingAgent) and ag.rule == ClosingRule()
+    ag.controller.close()
+    ag = make_agent("infighter+close=1.4,0.8:avoid=60,7", str(tiny_graph_file), boxing_library, 2)
+    assert ag.rule == ClosingRule(engage_r_m=1.4, engage_theta_rad=0.8, avoid=(60, 7))
+    ag.controller.close()
+    with pytest.raises(ValueError, match="outside the library"):
+        make_agent(f"infighter+close:avoid={boxing_library.n_actions}", str(tiny_graph_file), boxing_library, 2)
+    for bad in ("infighter+close=near", "infighter+close+close", "infighter+close:avoid=jab", "infighter+close:near=1"):
         with pytest.raises(ValueError, match="close"):
             make_agent(bad, str(tiny_graph_file), boxing_library, 2)
+
+
+@pytest.mark.realdata
+def test_the_rule_does_not_launch_avoided_actions_unless_nothing_else_is_legal(boxing_library):
+    lib = boxing_library
+    plain = ClosingRule()
+    menu = lib.next(0)
+    first = plain.choose(menu, 3.0, 2.5, lib)
+    avoiding = ClosingRule(avoid=(first,))
+    second = avoiding.choose(menu, 3.0, 2.5, lib)
+    assert second is not None and second != first and second in menu
+    assert avoiding.choose(np.array([first]), 3.0, 2.5, lib) == first      # the only legal action
+    t, r, th, played = avoiding.rollout(lib, 0, 3.0, 2.5, max_s=30.0)
+    assert avoiding.engaged(r, th) and first not in played[:1]
+
+
+def test_fall_odds_counts_falls_in_and_right_after_each_action(tmp_path):
+    import json
+
+    from tracker.fall_odds import fall_odds, main
+    log = [  # fighter 0 plays 5 (0-1 s), 7 (1-2 s), 5 (2-3 s), 9 (3-4 s); falls at 1.5 s and 3.2 s
+        {"type": "action", "t": 0.0, "player": 0, "action": 5}, {"type": "action", "t": 0.0, "player": 1, "action": 7},
+        {"type": "action", "t": 1.0, "player": 0, "action": 7}, {"type": "fall", "t": 1.5, "player": 0},
+        {"type": "action", "t": 2.0, "player": 0, "action": 5}, {"type": "action", "t": 3.0, "player": 0, "action": 9},
+        {"type": "fall", "t": 3.2, "player": 0}, {"type": "fall", "t": 3.5, "player": 1}]
+    d = tmp_path / "bout"
+    d.mkdir()
+    (d / "log.jsonl").write_text("\n".join(json.dumps(e) for e in log))
+    (d / "summary.json").write_text(json.dumps({"seconds": 4.0}))
+    fo = fall_odds([d], player=0, n_actions=10)
+    assert fo.plays[[5, 7, 9]].tolist() == [2, 1, 1] and fo.plays.sum() == 4
+    assert fo.falls_in[[5, 7, 9]].tolist() == [0, 1, 1]
+    assert fo.falls_next[[5, 7, 9]].tolist() == [2, 0, 0]     # 5 came right before both falls
+    assert fo.seconds[5] == pytest.approx(2.0) and fo.mean() == pytest.approx(4 / 4)
+    assert fo.suggest_avoid(min_plays=2, factor=1.0) == [5]
+    assert fall_odds([d], player=1).plays[7] == 1
+    assert main([str(tmp_path / "missing")]) == 2
+
+
+def test_physics_rl_styles_keep_the_closing_rules_commas():
+    from tracker.physics_rl import split_styles
+    assert split_styles("infighter,outboxer") == ["infighter", "outboxer"]
+    assert split_styles("infighter+close=1.4,0.8:avoid=7,60,outboxer+phys+close") == [
+        "infighter+close=1.4,0.8:avoid=7,60", "outboxer+phys+close"]

@@ -140,6 +140,21 @@ def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_fil
         assert (tmp_path / "run0").joinpath(s0["artifacts"][name].split("/")[-1]).is_file()
 
 
+def test_wall_clock_budget_cuts_the_bout_and_the_summary_covers_what_was_played(tiny_graph_file, tmp_path, capsys):
+    from tracker.bout_cli import cmd_physics_fight
+    args = _bout_args(tiny_graph_file, tmp_path / "cut")
+    args.max_wall_s = 1e-9                   # exceeded after the first control step
+    assert cmd_physics_fight(args) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["seconds"] == pytest.approx(1 / 30) and s["sim_s"] == pytest.approx(1 / 30)
+    dist = [json.loads(l) for l in (tmp_path / "cut" / "log.jsonl").read_text().splitlines()
+            if json.loads(l)["type"] == "distance"]
+    assert len(dist) == 1                    # the trace holds the start only (it is sampled every 0.1 s)
+    from tracker.bout import PhysicsBout
+    with pytest.raises(ValueError, match="max_wall_s"):
+        PhysicsBout.run(None, max_wall_s=0.0)
+
+
 def test_bout_video_renders(setup, tmp_path):
     """The MP4 of a short bout (offscreen MuJoCo: EGL, else OSMesa)."""
     from tracker.bout import BoutConfig, MenuAgent, PhysicsBout

@@ -120,10 +120,16 @@ class PhysicsBout:
         self.hook_gap_m = 0.5
 
     # ------------------------------------------------------------------ run
-    def run(self, seed: int = 0, initial=None, progress: bool = False) -> PhysicsBoutResult:
+    def run(self, seed: int = 0, initial=None, progress: bool = False,
+            max_wall_s: float | None = None) -> PhysicsBoutResult:
         """Play one bout (deterministic for a seed on one machine): ``start``, ``step`` until the
         bout's length, ``finish``. ``initial``: a igraph_fight.game.FightState to start from
-        instead of the seed's random start."""
+        instead of the seed's random start. ``max_wall_s``: stop early once the loop has taken this
+        many wall-clock seconds (slow trackers); the result then covers the seconds simulated so far
+        (its ``seconds``), which per-minute figures divide by. The steps played are the same as a
+        full bout's first ones."""
+        if max_wall_s is not None and not max_wall_s > 0:
+            raise ValueError(f"max_wall_s must be positive seconds, got {max_wall_s}")
         self.start(seed, initial)
         it = range(self.n_steps)
         if progress:
@@ -133,6 +139,8 @@ class PhysicsBout:
         try:
             for _ in it:
                 self.step()
+                if max_wall_s is not None and time.perf_counter() - t_wall > max_wall_s:
+                    break
         finally:
             self.env.substep_hook = None
         return self.finish(time.perf_counter() - t_wall)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 import sys
 from typing import NamedTuple, Protocol
 
@@ -109,8 +110,12 @@ class ClosingAgent:
         self.inner = inner
         self.library = library
         self.rule = rule if rule is not None else ClosingRule()
+        bad = [a for a in self.rule.avoid if not 0 <= a < library.n_actions]
+        if bad:
+            raise ValueError(f"closing rule: avoid names actions {bad} outside the library's 0..{library.n_actions - 1}")
         self.name = f"{inner.name}+close"
         self.closing = 0
+        self._last = None
 
     def __getattr__(self, name: str):
         if name == "inner":                   # not set yet (copy, pickle): no recursion
@@ -119,10 +124,15 @@ class ClosingAgent:
 
     def reset(self, bout, k, rng) -> None:
         self.closing = 0
+        self._last = None
         self.inner.reset(bout, k, rng)
 
     def _rule(self, ctx: DecisionContext) -> int | None:
-        return self.rule.choose(ctx.menu, float(ctx.obs.r), float(ctx.obs.theta_self), self.library)
+        # the last answer kept: peek() may be asked every control step about the same decision
+        key = (np.asarray(ctx.menu).tobytes(), float(ctx.obs.r), float(ctx.obs.theta_self))
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self.rule.choose(ctx.menu, key[1], key[2], self.library))
+        return self._last[1]
 
     def decide(self, ctx: DecisionContext) -> int:
         a = self._rule(ctx)
@@ -216,24 +226,26 @@ def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", 
     (its NPCController's ``first_ply``); ``STYLE+phys`` or ``STYLE+phys:MODEL`` the IG fighter
     whose first ply uses physically measured hit odds (tracker.hit_model; default the shipped
     model; later plies by ``future``); ``rl`` or ``rl:CKPT`` the physics RL baseline
-    (tracker.physics_rl). ``+close`` or ``+close=R,THETA`` after a style (with or without +phys)
+    (tracker.physics_rl). ``+close[=R,THETA][:avoid=A,B,...]`` after a style (with or without +phys)
     wraps the fighter in a ClosingAgent (igraph_fight.closing.ClosingRule: engaged within R metres
-    and THETA radians of facing; defaults 1.6 m, 1.0 rad)."""
+    and THETA radians of facing, defaults 1.6 m, 1.0 rad; avoid: library ids the rule does not
+    launch, e.g. from ``python -m tracker.fall_odds``)."""
     if spec == "rl" or spec.startswith("rl:"):
         from .physics_rl import load_rl_agent
         return load_rl_agent(spec[3:] or None, library)
     from igraph_fight.controller import NPCController
-    style, *opts = spec.split("+")
+    # options split off at "+phys" / "+close" only, so a style file's path may hold a "+"
+    style, *opts = re.split(r"\+(?=(?:phys|close)(?:[:=]|$|\+))", spec)
     phys, close = None, None
     for opt in opts:
-        kind, _, arg = opt.partition(":" if opt.startswith("phys") else "=")
+        kind, arg = ("close", opt[5:]) if opt.startswith("close") else opt.partition(":")[::2]
         if kind == "phys" and phys is None:
             phys = arg
         elif kind == "close" and close is None:
             close = _closing_rule(arg, spec)
         else:
             raise ValueError(f"unknown or repeated fighter option {opt!r} in {spec!r} "
-                             "(STYLE+phys[:MODEL], STYLE+close[=R,THETA] or both)")
+                             "(STYLE+phys[:MODEL], STYLE+close[=R,THETA][:avoid=A,B,...] or both)")
     if phys is not None:
         from .hit_model import phys_fighter
         ag = phys_fighter(graph, library, style, depth, phys or None, future)
@@ -243,17 +255,38 @@ def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", 
     if close is None:
         return ag
     lib = library if library is not None else ag.controller.library
-    return ClosingAgent(ag, lib, close)
+    try:
+        return ClosingAgent(ag, lib, close)
+    except ValueError:
+        getattr(ag.controller, "close", lambda: None)()      # the inner fighter's policy worker
+        raise
 
 
 def _closing_rule(arg: str, spec: str):
-    """``close`` / ``close=R,THETA`` (metres, radians) -> igraph_fight.closing.ClosingRule."""
+    """What follows ``close`` in ``close[=R,THETA][:avoid=A,B,...]`` (metres, radians, library ids)
+    -> igraph_fight.closing.ClosingRule."""
     from igraph_fight.closing import ClosingRule
-    if not arg:
-        return ClosingRule()
+    kw = {}
+    head, *opts = arg.split(":")
+    if head:
+        try:
+            if not head.startswith("="):
+                raise ValueError(f"unexpected {head!r}")
+            r, th = (float(v) for v in head[1:].split(","))
+            kw.update(engage_r_m=r, engage_theta_rad=th)
+        except ValueError as e:
+            raise ValueError(f"fighter {spec!r}: close=R,THETA needs a distance in metres and an angle in radians "
+                             f"({e})") from None
+    for o in opts:
+        name, _, val = o.partition("=")
+        try:
+            if name != "avoid" or "avoid" in kw:
+                raise ValueError(f"unknown or repeated {o!r}")
+            kw["avoid"] = tuple(int(v) for v in val.split(","))
+        except ValueError as e:
+            raise ValueError(f"fighter {spec!r}: close[=R,THETA][:avoid=A,B,...] takes library action ids after "
+                             f"avoid= ({e})") from None
     try:
-        r, th = (float(v) for v in arg.split(","))
-        return ClosingRule(engage_r_m=r, engage_theta_rad=th)
+        return ClosingRule(**kw)
     except ValueError as e:
-        raise ValueError(f"fighter {spec!r}: close=R,THETA needs a distance in metres and an angle in radians "
-                         f"({e})") from None
+        raise ValueError(f"fighter {spec!r}: {e}") from None

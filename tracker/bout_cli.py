@@ -52,7 +52,7 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
                                     tracker=getattr(args, "tracker", None), video=video,
                                     video_fps=float(getattr(args, "video_fps", 15.0) or 15.0),
                                     root_assist=bool(getattr(args, "root_assist", False)),
-                                    progress=not args.json,
+                                    progress=not args.json, max_wall_s=getattr(args, "max_wall_s", None),
                                     config=BoutConfig(seconds=args.seconds,
                                                       reset_place=getattr(args, "reset_place", "reference"),
                                                       reset_facing=getattr(args, "reset_facing", "opponent")))
@@ -84,8 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--graph", required=True)
     f.add_argument("--library", default=None)
     f.add_argument("--a", default="infighter", help="style, STYLE+phys[:MODEL] (physically measured hit odds, "
-                   "tracker.hit_model), STYLE+close[=R,THETA] (closes in by a geometric rule until engaged within R m and "
-                   "THETA rad: igraph_fight.closing), both, or rl[:CKPT] for the physics RL baseline")
+                   "tracker.hit_model), STYLE+close[=R,THETA][:avoid=A,B,...] (closes in by a geometric rule until "
+                   "engaged within R m and THETA rad, never launching the avoided library actions: igraph_fight.closing), both, or rl[:CKPT] for the physics RL baseline")
     f.add_argument("--b", default="outboxer")
     f.add_argument("--depth-a", type=int, default=5)
     f.add_argument("--depth-b", type=int, default=5)
@@ -99,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
     f.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     f.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
+    f.add_argument("--max-wall-s", type=float, default=None,
+                   help="stop after this many wall-clock seconds (slow trackers); the summary covers the seconds "
+                   "simulated by then (its 'seconds'), per-minute figures divide by them")
     f.add_argument("--json", action="store_true")
     r = sub.add_parser("series", help="N physics bouts between two agents, aggregated (no artifacts)")
     r.add_argument("--graph", required=True)

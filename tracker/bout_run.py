@@ -24,9 +24,12 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
                       depth_b: int = 5, seconds: float = 60.0, seed: int = 1, out: str | os.PathLike = "out/fight",
                       library=None, swap_a: tuple[float, str] | None = None, tracker: str | None = None,
                       video: bool = True, video_fps: float = 15.0, width: int = 640, height: int = 360,
-                      root_assist: bool = False, progress: bool = False, config: BoutConfig | None = None) -> dict:
+                      root_assist: bool = False, progress: bool = False, config: BoutConfig | None = None,
+                      max_wall_s: float | None = None) -> dict:
     """One physics bout from a graph file to artifacts (the physics twin of igraph_fight.bouts.run_style_bout).
-    Returns the summary dict (see PhysicsBoutResult.summary, plus ``artifacts``)."""
+    Returns the summary dict (see PhysicsBoutResult.summary, plus ``artifacts``). ``max_wall_s``: stop
+    the bout after this many wall-clock seconds (PhysicsBout.run); the summary's ``seconds`` says how
+    much was simulated."""
     from igraph_fight.graph import load_graph
     g = load_graph(graph) if not hasattr(graph, "arrays") else graph
     if library is not None and not hasattr(library, "n_actions"):
@@ -51,7 +54,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
             a0.name = f"{a0.name}->{st}"
 
         bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))
-    res = bout.run(seed=seed, progress=progress)
+    res = bout.run(seed=seed, progress=progress, max_wall_s=max_wall_s)
     title = f"{style_a} vs {style_b}" + (" [root assist: not physics]" if root_assist else "")
     summary = write_physics_artifacts(bout, res, out, title=title, video=video, video_fps=video_fps, width=width,
                                       height=height)

@@ -39,6 +39,7 @@ import json
 import math
 import multiprocessing as mp
 import os
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, fields
@@ -569,6 +570,12 @@ def _pooled_shares(rows: list[dict], side: str) -> dict:
     return {k: round(v / n, 4) for k, v in sorted(counts.items(), key=lambda kv: -kv[1])} if n else {}
 
 
+def split_styles(text: str) -> list[str]:
+    """``--styles`` to fighter specs: split at commas, except a comma before a digit, which belongs to
+    a style's options (``close=R,THETA``, ``:avoid=A,B``)."""
+    return [s for s in re.split(r",(?![\d.])", text) if s]
+
+
 def main(argv: list[str] | None = None) -> int:
     from igraph_fight.controller import FIRST_PLY
     p = argparse.ArgumentParser(prog="python -m tracker.physics_rl", description="physics RL baseline")
@@ -588,7 +595,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--rl", default=None)
     e.add_argument("--tracker", default=None)
     e.add_argument("--styles", default="infighter,outboxer",
-                   help="comma-separated IG styles; STYLE+close: closes in by a geometric rule until engaged")
+                   help="comma-separated IG styles; STYLE+close[=R,THETA][:avoid=A,B,...]: closes in by a geometric "
+                   "rule until engaged (igraph_fight.closing)")
     e.add_argument("--bouts", type=int, default=10)
     e.add_argument("--seconds", type=float, default=60.0)
     e.add_argument("--depth", type=int, default=5)
@@ -617,7 +625,7 @@ def main(argv: list[str] | None = None) -> int:
                     log=lambda s: print(s, flush=True), progress=not a.no_progress)
         print(json.dumps(res["budget"]))
         return 0
-    res = evaluate_vs_rl(a.graph, a.rl, a.styles.split(","), a.bouts, a.seconds, a.depth, a.tracker, a.library,
+    res = evaluate_vs_rl(a.graph, a.rl, split_styles(a.styles), a.bouts, a.seconds, a.depth, a.tracker, a.library,
                          seed0=a.seed0, root_assist=a.root_assist, log=lambda s: print(s, flush=True), first_ply=a.first_ply,
                          hit_model=a.hit_model, future=a.future, workers=a.workers)
     summary = {k: v for k, v in res.items() if k != "styles"}

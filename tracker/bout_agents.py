@@ -236,6 +236,8 @@ def make_agent(spec: str, graph, library, depth: int, first_ply: str = "table", 
     from igraph_fight.controller import NPCController
     # options split off at "+phys" / "+close" only, so a style file's path may hold a "+"
     style, *opts = re.split(r"\+(?=(?:phys|close)(?:[:=]|$|\+))", spec)
+    if "+" in style and not os.path.exists(style):
+        opts = [style.split("+", 1)[1]] + opts              # an unknown option, not a style file
     phys, close = None, None
     for opt in opts:
         kind, arg = ("close", opt[5:]) if opt.startswith("close") else opt.partition(":")[::2]

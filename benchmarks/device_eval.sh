@@ -20,22 +20,8 @@ BOUTS=${BOUTS:-64}; WORKERS=${WORKERS:-16}; BUDGET_S=${BUDGET_S:-330}; GRAPH=${G
 TRACKER=${TRACKER:-tracker/checkpoints/boxing_cmu13.pt}; SECONDS_BOUT=${BOUT_SECONDS:-60}; SEED=${SEED:-10000}
 CHUNKS=${CHUNKS:-6}; GRAPH_WORKERS=${GRAPH_WORKERS:-16}; HIT_MODEL=${HIT_MODEL:-default}
 HM="--hit-model"; [ "$HIT_MODEL" = none ] && HM=""; [ "$HIT_MODEL" != none ] && [ "$HIT_MODEL" != default ] && HM="--hit-model $HIT_MODEL"
-export PYTHONPATH=$PWD
-if [ -n "${INSTALL:-}" ]; then
-  $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl 2>&1 | tail -2
-  export PYTHONPATH=/tmp/site:$PWD
-fi
-nproc; $PY -c "import mujoco, numba, torch, numpy; print('mujoco', mujoco.__version__, 'numba', numba.__version__, 'torch', torch.__version__, 'numpy', numpy.__version__)"
-if [ -z "$GRAPH" ]; then
-  GRAPH=/tmp/g.igz; t0=$(date +%s)
-  $PY -m igraph_fight.cli build --mocap .devdata/boxing --out $GRAPH --workers $GRAPH_WORKERS > "$OUT/build.log" 2>&1 || { tail -40 "$OUT/build.log"; exit 1; }
-  echo "graph built in $(( $(date +%s) - t0 )) s"; tail -3 "$OUT/build.log"
-fi
+source benchmarks/device_setup.sh
 T0=$(date +%s)
-# one thread per bout process (16 processes ran about 2.5x slower per process than one process on the
-# development VM in the thirteenth and fifteenth sessions; with one thread each still about 2x in the
-# eighteenth, so the pools were not the cause: tracker/BOUTS.md, eighteenth session)
-export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 for c in $(seq 0 $((CHUNKS - 1))); do
   [ $(( $(date +%s) - T0 )) -gt "$BUDGET_S" ] && break
   t1=$(date +%s)

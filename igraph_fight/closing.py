@@ -37,7 +37,7 @@ rad) the rule engages the fighter in 8.3 s on average (17 s at most) over the li
 starts, the opponent standing still: the library has no forward step, so closing in rides on
 straights and turns (0.1-0.3 m each). In physics bouts against the RL baseline (tracker/BOUTS.md,
 twentieth session) it is what lets the planner fighters land punches at all. In the
-infighter-against-outboxer physics bout it adds falls to the fighter it moves (the infighter 3.8 a
+infighter-against-outboxer physics bout it adds falls to the infighter (3.8 a
 minute with the rule on both fighters, 2.0 with it on the infighter only, 1.0-1.2 without; and with
 the rule on both, the two can circle each other, each stepping left, each taking the other to
 stand still: tracker/BOUTS.md, twenty-first session).

@@ -38,7 +38,7 @@ starts, the opponent standing still: the library has no forward step, so closing
 straights and turns (0.1-0.3 m each). In physics bouts against the RL baseline (tracker/BOUTS.md,
 twentieth session) it is what lets the planner fighters land punches at all. In the
 infighter-against-outboxer physics bout it adds falls to the infighter (3.8 a
-minute with the rule on both fighters, 2.0 with it on the infighter only, 1.0-1.2 without; and with
+minute with the rule on both fighters, 2.0 with it on the infighter only, 1.5 without; and with
 the rule on both, the two can circle each other, each stepping left, each taking the other to
 stand still: tracker/BOUTS.md, twenty-first session).
 

@@ -93,7 +93,8 @@ def main(argv=None) -> int:
     runs = [("policy table", IGAgent(ca, "a"), IGAgent(cb, "b")),
             ("closing rule, then the table", _Closing(IGAgent(ca, "a"), rule, lib), IGAgent(cb, "b"))]
     if args.both:
-        runs.append(("the rule on both fighters", _Closing(IGAgent(ca, "a"), rule, lib), _Closing(IGAgent(cb, "b"), rule, lib)))
+        runs.append(("the rule on both fighters", _Closing(IGAgent(ca, "a"), rule, lib),
+                     _Closing(IGAgent(cb, "b"), rule, lib)))
     for name, a, b in runs:
         t0 = time.perf_counter()
         rows[name] = _bouts(game, [a, b], seeds, args.seconds)

@@ -21,9 +21,9 @@ GRAPH=${GRAPH:-}
 source benchmarks/device_setup.sh
 rm -rf /tmp/igf_device_bouts; mkdir -p /tmp/igf_device_bouts; T0=$(date +%s)
 for cfg in $CONFIGS; do
-  # A and B split at the first comma not before a digit (close=R,THETA and :avoid=A,B keep theirs)
+  # A and B split as physics_rl --styles splits (close=R,THETA and :avoid=A,B keep their commas)
   name=${cfg%%=*}; ab=${cfg#*=}
-  read -r a b < <($PY -c "import re, sys; print(*re.split(r',(?![\d.])', sys.argv[1], maxsplit=1))" "$ab")
+  read -r a b < <($PY -c "import sys; from tracker.physics_rl import split_styles; print(*split_styles(sys.argv[1]))" "$ab")
   for s in $SEEDS; do
     $PY -m tracker.bout_cli fight --graph $GRAPH --a "$a" --b "$b" --seconds $SECONDS_BOUT --seed $s --tracker "$TRACKER" \
       --no-video --json --max-wall-s $WALL_S --out /tmp/igf_device_bouts/${name}_s$s > /tmp/igf_device_bouts/${name}_s$s.out 2>&1 &

@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--library", default=None)
     f.add_argument("--a", default="infighter", help="style, STYLE+phys[:MODEL] (physically measured hit odds, "
                    "tracker.hit_model), STYLE+close[=R,THETA][:avoid=A,B,...] (closes in by a geometric rule until "
-                   "engaged within R m and THETA rad, never launching the avoided library actions: igraph_fight.closing), both, or rl[:CKPT] for the physics RL baseline")
+                   "engaged within R m and THETA rad, never launching the avoided library actions: igraph_fight.closing), "
+                   "both, or rl[:CKPT] for the physics RL baseline")
     f.add_argument("--b", default="outboxer")
     f.add_argument("--depth-a", type=int, default=5)
     f.add_argument("--depth-b", type=int, default=5)

@@ -21,6 +21,7 @@ def test_search_tracker_spec():
     assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
     t = load_tracker("search:early:incr:first")
     assert (t.s.early_accept, t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, True, False)
+    assert not t.s.up_first and load_tracker("search:early:upfirst").s.up_first
     with pytest.raises(ValueError, match="needs a number"):
         load_tracker("search:heading=x")
     with pytest.raises(ValueError, match="candidates >= 1"):
@@ -98,6 +99,42 @@ def test_one_fighter_copy_reproduces_the_bout(setup):
 
 
 @pytest.mark.realdata
+def _scripted_search(settings, outcomes):
+    """A SearchController whose rollouts are scripted: outcomes[k] = (return, kept, steps up) of
+    candidate k; the env's state is not touched. Returns the controller and the candidates' offsets."""
+    from tracker.search_controller import SearchController
+    sc = SearchController(None, settings)
+    sc.rng, sc.sig, sc.delta, sc._tail, sc.extra = np.random.default_rng(0), np.ones(2), np.zeros(2), None, None
+    sc.stats = {"searches": 0, "full": 0, "none_up": 0, "fallen_chosen": 0}
+    tried = []
+
+    def score(env, obs, delta, keep_tail=False):
+        tried.append(delta.copy())
+        return outcomes[len(tried) - 1]
+    sc._score, sc._save, sc._restore = score, lambda env: None, lambda env, st: None
+    return sc, tried
+
+
+def test_up_first_ranks_a_rollout_that_stays_up_above_a_better_return_that_falls():
+    from tracker.search_controller import UP
+    # the plain policy falls at step 20; candidate 1 pays more but falls at step 40; candidate 2 stays up
+    outcomes = [(5.0, False, 20), (9.0, False, 40), (6.0, True, UP)]
+    sc, tried = _scripted_search(SearchSettings(candidates=3), outcomes)
+    np.testing.assert_array_equal(sc._search(None, None), tried[1])          # the best return, though it falls
+    assert sc.stats == {"searches": 1, "full": 1, "none_up": 0, "fallen_chosen": 1}
+    sc, tried = _scripted_search(SearchSettings(candidates=3, up_first=True), outcomes)
+    np.testing.assert_array_equal(sc._search(None, None), tried[2])
+    assert sc.stats == {"searches": 1, "full": 1, "none_up": 0, "fallen_chosen": 0}
+    # when every candidate falls, the one that stays up longest; an early acceptance is no full search
+    sc, tried = _scripted_search(SearchSettings(candidates=3, up_first=True), [(5.0, False, 20), (9.0, False, 10),
+                                                                              (1.0, False, 30)])
+    np.testing.assert_array_equal(sc._search(None, None), tried[2])
+    assert sc.stats["none_up"] == 1
+    sc, tried = _scripted_search(SearchSettings(candidates=3, early_accept=True), [(5.0, True, UP)] * 3)
+    assert not np.any(sc._search(None, None)) and len(tried) == 1
+    assert sc.stats == {"searches": 1, "full": 0, "none_up": 0, "fallen_chosen": 0}
+
+
 def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):
     """A 4-step look-ahead from a reference start never sees a fall: with early_accept every search
     stops at the plain candidate, so the walk is the plain policy's exactly."""

@@ -150,7 +150,7 @@ class ClosingAgent:
 def load_tracker(spec: str | None = None):
     """The tracking controller: ``"pd"``, a checkpoint path, None for the shipped learned policy
     (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing), or
-    ``"search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]"``: that
+    ``"search[:C,L][:early|full][:reuse][:incr][:first][:upfirst][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]"``: that
     policy steered by a run-time search (tracker.bout_search; default tracker.bout_search.BOUT_SEARCH;
     C candidates, L look-ahead control steps, early acceptance on or off, and the other knobs of
     tracker.search_controller.SearchSettings; aim=W: the planned strikes aimed with weight W (touch=W: and
@@ -177,11 +177,12 @@ def load_tracker(spec: str | None = None):
     return load_policy(spec)
 
 
-_FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept"}   # spec tokens -> SearchSettings
+# spec tokens -> SearchSettings flags
+_FLAGS = {"reuse": "reuse", "incr": "incremental", "first": "first_kept", "upfirst": "up_first"}
 
 
 def load_bout_search(spec: str):
-    """``search[:C,L][:early|full][:reuse][:incr][:first][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]`` ->
+    """``search[:C,L][:early|full][:reuse][:incr][:first][:upfirst][:heading=W][:yawtol=RAD][:aim=W][:touch=W][:lead=W][:spread=F][:duel][:foresee][:CKPT]`` ->
     tracker.bout_search.BoutSearchTracker (see load_tracker)."""
     from dataclasses import replace
 

@@ -62,6 +62,8 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     summary["reset_place"] = cfg.reset_place
     summary["reset_facing"] = cfg.reset_facing
     summary["machine_load"] = _load_average()
+    if hasattr(trk, "searchers"):                 # a search tracker: per fighter, how its searches went
+        summary["search_stats"] = [dict(sc.stats) for sc in trk.searchers]
     from motion_graph.atomic import atomic_write_text
     atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
     return summary

@@ -37,6 +37,11 @@ kinematic simulator does not model (its targets are spheres, a guard action no d
 fist on a target: the aim term alone scores a fist stopped by a forearm 2 cm short of the head
 at 98% of a hit. ``lead`` (eighteenth session) rewards the striker's pelvis on its reference from 0.5 s
 before each planned window to its end (measured: three times the falls, no larger landed share).
+``upfirst`` (twenty-second session, SearchSettings.up_first) ranks the candidates by how long their
+rollouts stay up before their returns: with the heading, aim and touch terms a candidate that falls
+late in the look-ahead otherwise wins over one that stays up whenever it pays more early on (in 20 s
+of two default bouts, 7-14 of a fighter's 83-119 full searches chose a rollout that fell while
+another stayed up). Each bout's summary.json has the searches' counts (``search_stats``).
 
 Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, every candidate tried, and a heading
 reward (SearchSettings.heading_weight). Cost: candidates x (segment + lookahead) / segment = 256

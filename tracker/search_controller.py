@@ -26,6 +26,8 @@ import numpy as np
 
 from .controller import register_controller
 
+UP = 1 << 30        # SearchController._score's steps stayed up for a rollout that never fell or drifted
+
 
 @dataclass(frozen=True)
 class SearchSettings:
@@ -55,6 +57,11 @@ class SearchSettings:
     # Heading (physics bouts, where a fighter's facing steers the planner; fifteenth session):
     heading_weight: float = 0.0   # extra reward heading_weight * exp(-10 (1 - cos(yaw error))) per step
     yaw_tol: float = float("inf")  # early_accept also needs the pelvis yaw within this (rad) of the reference's
+    # Ranking (twenty-second session): by default the best discounted return wins, so a rollout that
+    # falls late in the look-ahead (its return only truncated) can beat one that stays up when an extra
+    # term (heading, aim) pays more early on; up_first ranks by steps stayed up (a rollout that stays up
+    # over the whole look-ahead first), then by return
+    up_first: bool = False
 
     def variants(self) -> str:
         """The non-default knobs in words (for describe()), e.g. ", early acceptance, heading weight 1"."""
@@ -65,6 +72,8 @@ class SearchSettings:
             words.append(f"heading weight {self.heading_weight:g}")
         if self.yaw_tol < np.inf:
             words.append(f"yaw tolerance {self.yaw_tol:g} rad")
+        if self.up_first:
+            words.append("staying up ranked first")
         return "".join(", " + w for w in words)
 
 
@@ -101,6 +110,10 @@ class SearchController:
         # extra(env) -> float: a reward added to every rollout step's (None: none); the bout search
         # sets it for the strikes it aims (tracker.bout_search)
         self.extra = None
+        # counts over the searches since reset: full ones (not ended by early acceptance or an
+        # incremental extension), those where no candidate stayed up, and those whose chosen
+        # candidate fell in its rollout while another stayed up (only possible without up_first)
+        self.stats = {"searches": 0, "full": 0, "none_up": 0, "fallen_chosen": 0}
 
     def describe(self) -> str:
         s = self.s
@@ -160,10 +173,11 @@ class SearchController:
         """The pelvis yaw within yaw_tol of the reference's (always, without a tolerance)."""
         return self.s.yaw_tol == np.inf or cos_err >= np.cos(self.s.yaw_tol)
 
-    def _score(self, env, obs: np.ndarray, delta: np.ndarray, keep_tail: bool = False) -> tuple[float, bool]:
-        """Discounted tracking return of one candidate, and whether its rollout stayed up and on the
-        reference to the end of the look-ahead (or of the reference). ``keep_tail``: remember the
-        rollout's end state when it did (SearchSettings.incremental)."""
+    def _score(self, env, obs: np.ndarray, delta: np.ndarray, keep_tail: bool = False) -> tuple[float, bool, int]:
+        """Discounted tracking return of one candidate, whether its rollout stayed up and on the
+        reference to the end of the look-ahead (or of the reference), and the control steps it stayed
+        up and within drift_m (a large number when it never fell or drifted). ``keep_tail``: remember
+        the rollout's end state when it stayed (SearchSettings.incremental)."""
         from .train import tracking_reward
         s = self.s
         zero = np.zeros_like(delta)
@@ -171,7 +185,7 @@ class SearchController:
         for j in range(s.segment + s.lookahead):
             o, _, done, info = env.step(self._apply(env, o, delta if j < s.segment else zero))
             if self._lost(env, info):
-                return ret, False
+                return ret, False, j
             r = tracking_reward(env, self.rr, s.reward_weights, self.fighter)
             if s.heading_weight or s.yaw_tol < np.inf:
                 cos_err = self._cos_yaw_err(env)
@@ -186,7 +200,7 @@ class SearchController:
         if kept and keep_tail:
             mujoco.mj_copyData(self._snap_of(env, 1), env.model, env.data)
             self._tail = (env.t, env.sim_time, env.done, o.copy())
-        return ret, kept
+        return ret, kept, UP
 
     def _extend(self, env) -> bool:
         """Extend the kept plain rollout by one segment (the env is left at its end); False, and the
@@ -213,13 +227,14 @@ class SearchController:
         # early or first-kept stop while one is set
         early = self.s.early_accept and self.extra is None
         incremental = early and self.s.incremental
+        self.stats["searches"] += 1
         if incremental and self._tail is not None and not np.any(self.delta):
             ok = self._extend(env)
             self._restore(env, st)
             if ok:
                 return self.delta
         self._tail = None
-        best, best_ret = np.zeros(len(self.sig)), -np.inf
+        best, best_key, best_up, any_up = np.zeros(len(self.sig)), (-np.inf, -np.inf), 0, False
         prev = self.delta
         for k in range(self.s.candidates):
             if k:
@@ -230,13 +245,21 @@ class SearchController:
                 delta = prev
             else:
                 delta = self.rng.normal(0.0, 1.0, len(self.sig)) * self.sig
-            ret, kept = self._score(env, obs, delta, keep_tail=incremental and k == 0)
-            if ret > best_ret:
-                best, best_ret = delta, ret
+            ret, kept, up = self._score(env, obs, delta, keep_tail=incremental and k == 0)
+            key = (up, ret) if self.s.up_first else (0, ret)
+            any_up = any_up or up == UP
+            if key > best_key:
+                best, best_key, best_up = delta, key, up
             if kept and ((k == 0 and early) or (k > 0 and self.s.first_kept and self.extra is None)):
                 if k > 0:
-                    best = delta              # the first that stays up, not the best return so far
+                    best, best_up = delta, up      # the first that stays up, not the best return so far
                 break
+        else:
+            k = -1                            # every candidate tried
+        if k != 0:                            # not ended by early acceptance
+            self.stats["full"] += 1
+            self.stats["none_up"] += not any_up
+            self.stats["fallen_chosen"] += any_up and best_up != UP
         self._restore(env, st)
         self.delta = best
         return best

@@ -235,6 +235,7 @@ class SearchController:
                 return self.delta
         self._tail = None
         best, best_key, best_up, any_up = np.zeros(len(self.sig)), (-np.inf, -np.inf), 0, False
+        accepted = False                      # ended by early acceptance (not a full search)
         prev = self.delta
         for k in range(self.s.candidates):
             if k:
@@ -253,10 +254,9 @@ class SearchController:
             if kept and ((k == 0 and early) or (k > 0 and self.s.first_kept and self.extra is None)):
                 if k > 0:
                     best, best_up = delta, up      # the first that stays up, not the best return so far
+                accepted = k == 0
                 break
-        else:
-            k = -1                            # every candidate tried
-        if k != 0:                            # not ended by early acceptance
+        if not accepted:
             self.stats["full"] += 1
             self.stats["none_up"] += not any_up
             self.stats["fallen_chosen"] += any_up and best_up != UP

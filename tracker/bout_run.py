@@ -62,11 +62,19 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     summary["reset_place"] = cfg.reset_place
     summary["reset_facing"] = cfg.reset_facing
     summary["machine_load"] = _load_average()
-    if hasattr(trk, "searchers"):                 # a search tracker: per fighter, how its searches went
-        summary["search_stats"] = [dict(sc.stats) for sc in trk.searchers]
+    if search_stats(trk) is not None:
+        summary["search_stats"] = search_stats(trk)
     from motion_graph.atomic import atomic_write_text
     atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
     return summary
+
+
+def search_stats(tracker) -> list[dict] | None:
+    """A search tracker's counts over the bout it last played, per fighter (SearchController.stats:
+    searches, full, none_up, fallen_chosen); None for any other tracker."""
+    if not hasattr(tracker, "searchers"):
+        return None
+    return [dict(sc.stats) for sc in tracker.searchers]
 
 
 def _median(xs: list) -> float | None:
@@ -92,6 +100,8 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
         bout = PhysicsBout(setup, agents, trk, cfg)
         s = bout.run(seed=seed0 + i).summary()
         s.pop("agents", None)
+        if search_stats(trk) is not None:
+            s["search_stats"] = search_stats(trk)
         rows.append(s)
         log(f"seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), falls "
             f"{s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "

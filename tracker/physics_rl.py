@@ -496,6 +496,7 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
 
     from .bout import PhysicsBout
     from .bout_agents import load_tracker, make_agent
+    from .bout_run import search_stats
     from .bout_setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = _library_from(None, library) if library else g.load_library()
@@ -510,6 +511,8 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
         bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
         s = bout.run(seed=seed).summary()
         rows.append({k: s[k] for k in _ROW_KEYS})
+        if search_stats(trk) is not None:
+            rows[-1]["search_stats"] = search_stats(trk)
         log(f"{style} vs rl, seed {seed}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), "
             f"falls {s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
             f"distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")

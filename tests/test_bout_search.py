@@ -133,6 +133,13 @@ def test_up_first_ranks_a_rollout_that_stays_up_above_a_better_return_that_falls
     sc, tried = _scripted_search(SearchSettings(candidates=3, early_accept=True), [(5.0, True, UP)] * 3)
     assert not np.any(sc._search(None, None)) and len(tried) == 1
     assert sc.stats == {"searches": 1, "full": 0, "none_up": 0, "fallen_chosen": 0}
+    # what a bout's summary and a series' or RL evaluation's rows carry: copies, one per fighter
+    from types import SimpleNamespace
+
+    from tracker.bout_run import search_stats
+    stats = search_stats(SimpleNamespace(searchers=[sc, sc]))
+    assert stats == [sc.stats, sc.stats] and stats[0] is not sc.stats
+    assert search_stats(load_tracker("pd")) is None
 
 
 def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):

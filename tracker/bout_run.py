@@ -62,8 +62,8 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
     summary["reset_place"] = cfg.reset_place
     summary["reset_facing"] = cfg.reset_facing
     summary["machine_load"] = _load_average()
-    if search_stats(trk) is not None:
-        summary["search_stats"] = search_stats(trk)
+    if (stats := search_stats(trk)) is not None:
+        summary["search_stats"] = stats
     from motion_graph.atomic import atomic_write_text
     atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=1))
     return summary
@@ -100,8 +100,8 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
         bout = PhysicsBout(setup, agents, trk, cfg)
         s = bout.run(seed=seed0 + i).summary()
         s.pop("agents", None)
-        if search_stats(trk) is not None:
-            s["search_stats"] = search_stats(trk)
+        if (stats := search_stats(trk)) is not None:
+            s["search_stats"] = stats
         rows.append(s)
         log(f"seed {seed0 + i}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), falls "
             f"{s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "

@@ -511,8 +511,8 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
         bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
         s = bout.run(seed=seed).summary()
         rows.append({k: s[k] for k in _ROW_KEYS})
-        if search_stats(trk) is not None:
-            rows[-1]["search_stats"] = search_stats(trk)
+        if (stats := search_stats(trk)) is not None:
+            rows[-1]["search_stats"] = stats
         log(f"{style} vs rl, seed {seed}: score {s['score']:+.0f} (hits {s['hits_a']:.0f}-{s['hits_b']:.0f}), "
             f"falls {s['falls_a']}-{s['falls_b']}, planned {s['planned_hits']:.0f} realised {s['planned_realised']:.0f}, "
             f"distance {s['mean_distance_m']:.2f} m, rtf {s['realtime_factor']:.1f}x")

@@ -98,7 +98,6 @@ def test_one_fighter_copy_reproduces_the_bout(setup):
     env.t = t1
 
 
-@pytest.mark.realdata
 def _scripted_search(settings, outcomes):
     """A SearchController whose rollouts are scripted: outcomes[k] = (return, kept, steps up) of
     candidate k; the env's state is not touched. Returns the controller and the candidates' offsets."""
@@ -142,6 +141,7 @@ def test_up_first_ranks_a_rollout_that_stays_up_above_a_better_return_that_falls
     assert search_stats(load_tracker("pd")) is None
 
 
+@pytest.mark.realdata
 def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):
     """A 4-step look-ahead from a reference start never sees a fall: with early_accept every search
     stops at the plain candidate, so the walk is the plain policy's exactly."""

@@ -41,8 +41,9 @@ before each planned window to its end (measured: three times the falls, no large
 rollouts stay up before their returns: with the heading, aim and touch terms a candidate that falls
 late in the look-ahead otherwise wins over one that stays up whenever it pays more early on (in 20 s
 of two bouts under ``search:early:yawtol=0.35:aim=3:touch=10:spread=3:duel``, 7-14 of a fighter's
-83-119 full searches chose a rollout that fell while another stayed up). Each bout's summary.json, and each bout row of a series or
-of the RL evaluation, has the searches' counts (``search_stats``, tracker.bout_run.search_stats).
+83-119 full searches chose a rollout that fell while another stayed up). Each bout's summary.json,
+and each bout row of a series or of the RL evaluation, has the searches' counts (``search_stats``,
+tracker.bout_run.search_stats).
 
 Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, every candidate tried, and a heading
 reward (SearchSettings.heading_weight). Cost: candidates x (segment + lookahead) / segment = 256

@@ -193,6 +193,35 @@ def test_incremental_early_search_is_the_early_search_exactly(boxing_library):
     assert True in outcomes and False in outcomes, outcomes      # both paths taken
 
 
+@pytest.mark.realdata
+def test_incremental_first_kept_search_extends_the_chosen_offset_exactly(boxing_library):
+    """With first_kept, the chosen offset's rollout (the offset for one segment, the plain policy
+    after it) is kept and extended like the plain one: the same walk as without incremental checks,
+    with at least one extension made right after an offset was played."""
+    from tracker.evaluate import draw_walks, make_setup
+    from tracker.policy import load_policy
+    from tracker.search_controller import SearchController
+    from tracker.walks import LibraryWalks
+    from test_tracker_search import _qpos
+    st = make_setup(LibraryWalks(boxing_library))
+    walk = draw_walks(st.source, 1, 3, 1)[0]
+    s = SearchSettings(candidates=4, lookahead=24, seed=2, early_accept=True, first_kept=True)
+    after_offset = []
+
+    class Counting(SearchController):
+        def _extend(self, env):
+            played = bool(np.any(self.delta))
+            ok = super()._extend(env)
+            after_offset.append((played, ok))
+            return ok
+
+    ref = _qpos(st, SearchController(load_policy(), s), walk, steps=60)
+    incr = _qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=60)
+    np.testing.assert_array_equal(ref[0], incr[0])
+    assert ref[1:] == incr[1:]
+    assert (True, True) in after_offset, after_offset
+
+
 def test_aim_and_duel_spec():
     t = load_tracker("search:4,9:aim=2:duel")
     assert (t.aim, t.duel, t.s.candidates) == (2.0, True, 4)

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
         q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, tracker/vforce.py), learned, or "
                             "search (the learned policy steered by a run-time search: offline, ~0.15x real time), or "
-                            "search-fast (its cheaper variant: ~1.5x real time, tracker/TRAINING.md fifteenth session)")
+                            "search-fast (its cheaper variant: ~1.8x real time, tracker/TRAINING.md fifteenth and twenty-fourth sessions)")
         q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
                                       "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
         q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")

@@ -53,7 +53,8 @@ class SearchSettings:
     #                               reference, within yaw_tol) over the look-ahead, instead of trying all
     incremental: bool = False     # with early_accept: an accepted plain rollout is kept and, at the next
     #                               search, extended by one segment instead of simulated again (exact
-    #                               where the env is the one played: the plain policy is deterministic)
+    #                               where the env is the one played: the plain policy is deterministic);
+    #                               with first_kept too, the chosen offset's rollout likewise
     # Heading (physics bouts, where a fighter's facing steers the planner; fifteenth session):
     heading_weight: float = 0.0   # extra reward heading_weight * exp(-10 (1 - cos(yaw error))) per step
     yaw_tol: float = float("inf")  # early_accept also needs the pelvis yaw within this (rad) of the reference's
@@ -106,7 +107,7 @@ class SearchController:
         self.k = 0
         self.delta = np.zeros(len(self.sig))
         self._snaps = {}                        # model -> (state snapshot, tail snapshot)
-        self._tail = None                       # (t, sim_time, done, obs) at the end of the kept plain rollout
+        self._tail = None                       # (t, sim_time, done, obs) at the end of the kept rollout (incremental)
         # extra(env) -> float: a reward added to every rollout step's (None: none); the bout search
         # sets it for the strikes it aims (tracker.bout_search)
         self.extra = None
@@ -228,10 +229,11 @@ class SearchController:
         early = self.s.early_accept and self.extra is None
         incremental = early and self.s.incremental
         self.stats["searches"] += 1
-        if incremental and self._tail is not None and not np.any(self.delta):
+        if incremental and self._tail is not None:
             ok = self._extend(env)
             self._restore(env, st)
-            if ok:
+            if ok:                    # the kept rollout plays no offset after its first segment
+                self.delta = np.zeros(len(self.sig))
                 return self.delta
         self._tail = None
         best, best_key, best_up, any_up = np.zeros(len(self.sig)), (-np.inf, -np.inf), 0, False
@@ -246,7 +248,11 @@ class SearchController:
                 delta = prev
             else:
                 delta = self.rng.normal(0.0, 1.0, len(self.sig)) * self.sig
-            ret, kept, up = self._score(env, obs, delta, keep_tail=incremental and k == 0)
+            # the rollout kept for extension is the chosen one's: the plain policy's when early
+            # acceptance takes it, with first_kept also the first offset that stays up (its rollout is
+            # the offset for one segment and the plain policy after it: what is played next if the
+            # following searches accept the plain policy)
+            ret, kept, up = self._score(env, obs, delta, keep_tail=incremental and (k == 0 or self.s.first_kept))
             key = (up, ret) if self.s.up_first else (0, ret)
             any_up = any_up or up == UP
             if key > best_key:

@@ -1,0 +1,199 @@
+"""Do averaged search labels agree, and do they keep the body up? (issue 7, tracker/TRAINING.md item 0)
+
+The search's single labels (the best or first offset that stays up) from two searches of one
+state are nearly orthogonal, so a student learns their mean. An MPPI-style average over many
+candidates is the proposed cure. This probe measures it where it matters: at the states where the
+plain policy's own 1.5 s rollout falls (the search-fast controller's full searches, tracker
+walks of the tuning seed 100). At each such state, two independent sets of N random offsets (the
+search's sigmas) are rolled out over the segment + look-ahead; per set:
+
+- p_up: the share of random offsets whose rollout stays up (what one lottery ticket is worth);
+- the mean of the offsets that stay up, and the return-weighted mean exp((R - max R) / (tau std R));
+- whether each average, played as the offset, stays up itself;
+- cosines between the two sets' averages (their agreement), and the averages' norm against a
+  single offset's (how much averaging cancels).
+
+    python benchmarks/tracker_label_average_probe.py [--walks 4] [--first 0] [--n 128] [--states 25] [--json-out F]
+
+Prints one JSON line with the totals; --json-out keeps the per-state rows.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tracker.evaluate import draw_walks, make_setup, run_walk  # noqa: E402
+from tracker.policy import load_policy  # noqa: E402
+from tracker.search_controller import FAST_SEARCH, SearchController  # noqa: E402
+from tracker.walks import walk_source  # noqa: E402
+
+
+def _cos(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return float(a @ b / (na * nb)) if na > 0 and nb > 0 else float("nan")
+
+
+class ProbingSearch(SearchController):
+    """search-fast, probing the label averages at the first ``max_states`` full searches."""
+
+    def __init__(self, n: int, max_states: int, tau: float, seed: int) -> None:
+        super().__init__(load_policy(None), FAST_SEARCH)
+        self.n, self.max_states, self.tau = n, max_states, tau
+        self.probe_rng = np.random.default_rng(seed)
+        self.rows: list[dict] = []
+
+    def _search(self, env, obs):
+        full = self.stats["full"]
+        st = self._save(env)
+        best = super()._search(env, obs)                 # leaves the env as it was
+        if self.stats["full"] > full and len(self.rows) < self.max_states:
+            self.rows.append(self._probe(env, obs, st))
+            self._restore(env, st)
+        return best
+
+    def _roll(self, env, obs, st, delta) -> tuple[float, bool]:
+        self._restore(env, st)
+        ret, kept, _ = self._score(env, obs, delta)
+        return ret, kept
+
+    def _probe(self, env, obs, st) -> dict:
+        sets = []
+        for _ in range(2):
+            deltas = self.probe_rng.normal(0.0, 1.0, (self.n, len(self.sig))) * self.sig
+            rk = [self._roll(env, obs, st, d) for d in deltas]
+            ret = np.array([r for r, _ in rk])
+            up = np.array([k for _, k in rk])
+            w = np.exp((ret - ret.max()) / (self.tau * ret.std() + 1e-12))
+            mppi = (w[:, None] * deltas).sum(0) / w.sum()
+            mean_up = deltas[up].mean(0) if up.any() else np.zeros(len(self.sig))
+            sets.append(dict(p_up=float(up.mean()), mppi=mppi, mean_up=mean_up,
+                             single=float(np.linalg.norm(deltas, axis=1).mean()),
+                             first_up=deltas[np.argmax(up)] if up.any() else None))
+        a, b = sets
+        row = dict(t=int(env.t), p_up=[a["p_up"], b["p_up"]],
+                   cos_mppi=_cos(a["mppi"], b["mppi"]), cos_mean_up=_cos(a["mean_up"], b["mean_up"]),
+                   cos_first_up=_cos(a["first_up"], b["first_up"]) if a["first_up"] is not None
+                   and b["first_up"] is not None else float("nan"),
+                   norm_mppi=float(np.linalg.norm(a["mppi"]) / a["single"]),
+                   norm_mean_up=float(np.linalg.norm(a["mean_up"]) / a["single"]))
+        for key in ("mppi", "mean_up"):
+            row[f"{key}_stays_up"] = [bool(self._roll(env, obs, st, s[key])[1]) for s in sets]
+        return row
+
+
+class CollectingSearch(ProbingSearch):
+    """search-fast, recording at each full search the observation and the mean of the offsets (of
+    one set of N) whose rollouts stay up; with ``proposal`` (W, b, mu, sd: a ridge map from the
+    standardised observation) also whether the proposed offset stays up there."""
+
+    def __init__(self, n: int, max_states: int, seed: int, proposal=None) -> None:
+        super().__init__(n, max_states, 1.0, seed)
+        self.proposal = proposal
+
+    def _probe(self, env, obs, st) -> dict:
+        row = dict(obs=np.asarray(obs, float).copy())
+        if self.proposal is not None:
+            W, b, mu, sd = self.proposal
+            guess = np.clip(((obs - mu) / sd) @ W + b, -3 * self.sig, 3 * self.sig)
+            row["proposal_stays_up"] = bool(self._roll(env, obs, st, guess)[1])
+            row["scaled_stays_up"] = bool(self._roll(env, obs, st, 2.0 * guess)[1])
+            row["const_stays_up"] = bool(self._roll(env, obs, st, b)[1])      # the mean label, whatever the state
+        deltas = self.probe_rng.normal(0.0, 1.0, (self.n, len(self.sig))) * self.sig
+        up = np.array([self._roll(env, obs, st, d)[1] for d in deltas])
+        row.update(label=deltas[up].mean(0) if up.any() else np.zeros(len(self.sig)), p_up=float(up.mean()))
+        return row
+
+
+def fit_proposal(files: list[str], alphas=(1.0, 10.0, 100.0, 1000.0, 10000.0)):
+    """Ridge map standardised observation -> averaged label, alpha by held-out R^2 (the files'
+    last fifth of states held out); returns (W, b, mu, sd) refitted on all, and the scores."""
+    data = [np.load(f) for f in files]
+    X = np.concatenate([d["obs"] for d in data])
+    Y = np.concatenate([d["label"] for d in data])
+    keep = np.concatenate([d["p_up"] > 0 for d in data])
+    X, Y = X[keep], Y[keep]
+    mu, sd = X.mean(0), X.std(0) + 1e-6
+    Z = (X - mu) / sd
+    cut = int(0.8 * len(Z))
+
+    def ridge(Z, Y, alpha):
+        b = Y.mean(0)
+        W = np.linalg.solve(Z.T @ Z + alpha * np.eye(Z.shape[1]), Z.T @ (Y - b))
+        return W, b
+    scores = {}
+    for alpha in alphas:
+        W, b = ridge(Z[:cut], Y[:cut], alpha)
+        P = Z[cut:] @ W + b
+        r2 = 1.0 - ((Y[cut:] - P) ** 2).sum() / ((Y[cut:] - Y[:cut].mean(0)) ** 2).sum()
+        cos = np.mean([_cos(p, y) for p, y in zip(P, Y[cut:])])
+        scores[alpha] = (float(r2), float(cos))
+    best = max(scores, key=lambda k: scores[k][0])
+    W, b = ridge(Z, Y, best)
+    return (W, b, mu, sd), dict(states=len(Z), held_out=len(Z) - cut, alpha=best, scores=scores)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--walks", type=int, default=4)
+    ap.add_argument("--first", type=int, default=0, help="skip the seed's first walks")
+    ap.add_argument("--seed", type=int, default=100, help="walk seed (100: the tuning seed)")
+    ap.add_argument("--n", type=int, default=128, help="random offsets per set (two sets per state)")
+    ap.add_argument("--states", type=int, default=25, help="probe at most this many states")
+    ap.add_argument("--tau", type=float, default=0.2, help="MPPI temperature, in standard deviations of the returns")
+    ap.add_argument("--json-out", default="")
+    ap.add_argument("--collect", default="", help="record (observation, averaged label) at full searches into this .npz")
+    ap.add_argument("--proposal", nargs="*", default=None,
+                    help="fit a ridge proposal on these --collect files and test it at this run's full searches")
+    a = ap.parse_args(argv)
+    setup = make_setup(walk_source(None))
+    if a.collect or a.proposal is not None:
+        prop, fit = fit_proposal(a.proposal) if a.proposal else (None, None)
+        ctrl = CollectingSearch(a.n, a.states, seed=a.seed + a.first, proposal=prop)
+        for walk in draw_walks(setup.source, a.first + a.walks, 20, a.seed)[a.first:]:
+            if len(ctrl.rows) >= a.states:
+                break
+            run_walk(setup, ctrl, walk)
+        rows = ctrl.rows
+        out = dict(states=len(rows), n=a.n, p_up=float(np.mean([r["p_up"] for r in rows])))
+        if a.collect:
+            np.savez(a.collect, obs=np.array([r["obs"] for r in rows]), label=np.array([r["label"] for r in rows]),
+                     p_up=np.array([r["p_up"] for r in rows]))
+        if prop is not None:
+            out.update(fit=fit, proposal_stays_up=float(np.mean([r["proposal_stays_up"] for r in rows])),
+                       scaled_stays_up=float(np.mean([r["scaled_stays_up"] for r in rows])),
+                       const_stays_up=float(np.mean([r["const_stays_up"] for r in rows])))
+        print(json.dumps(out))
+        return 0
+    ctrl = ProbingSearch(a.n, a.states, a.tau, seed=a.seed + a.first)
+    for walk in draw_walks(setup.source, a.first + a.walks, 20, a.seed)[a.first:]:
+        if len(ctrl.rows) >= a.states:
+            break
+        run_walk(setup, ctrl, walk)
+    rows = ctrl.rows
+    if not rows:
+        print(json.dumps({"states": 0}))
+        return 0
+
+    def mean(key):
+        return float(np.nanmean([r[key] for r in rows]))
+
+    def share(key):
+        return float(np.mean([x for r in rows for x in r[key]]))
+    out = dict(states=len(rows), n=a.n, tau=a.tau, p_up=share("p_up"),
+               mppi_stays_up=share("mppi_stays_up"), mean_up_stays_up=share("mean_up_stays_up"),
+               cos_mppi=mean("cos_mppi"), cos_mean_up=mean("cos_mean_up"), cos_first_up=mean("cos_first_up"),
+               norm_mppi=mean("norm_mppi"), norm_mean_up=mean("norm_mean_up"))
+    if a.json_out:
+        Path(a.json_out).write_text(json.dumps(dict(out, rows=rows), indent=1))
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

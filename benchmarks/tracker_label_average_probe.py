@@ -110,6 +110,15 @@ class CollectingSearch(ProbingSearch):
         return row
 
 
+def _save_labels(path: str, rows: list[dict]) -> None:
+    """The collected (observation, label, p_up) rows as .npz, written atomically."""
+    import os
+    tmp = f"{path}.tmp.npz"
+    np.savez(tmp, obs=np.array([r["obs"] for r in rows]), label=np.array([r["label"] for r in rows]),
+             p_up=np.array([r["p_up"] for r in rows]))
+    os.replace(tmp, path)
+
+
 def fit_proposal(files: list[str], alphas=(1.0, 10.0, 100.0, 1000.0, 10000.0)):
     """Ridge map standardised observation -> averaged label, alpha by held-out R^2 (the files'
     last fifth of states held out); returns (W, b, mu, sd) refitted on all, and the scores."""
@@ -159,11 +168,10 @@ def main(argv=None) -> int:
             if len(ctrl.rows) >= a.states:
                 break
             run_walk(setup, ctrl, walk)
+            if a.collect and ctrl.rows:               # after every walk, so a long collection can be stopped
+                _save_labels(a.collect, ctrl.rows)
         rows = ctrl.rows
         out = dict(states=len(rows), n=a.n, p_up=float(np.mean([r["p_up"] for r in rows])))
-        if a.collect:
-            np.savez(a.collect, obs=np.array([r["obs"] for r in rows]), label=np.array([r["label"] for r in rows]),
-                     p_up=np.array([r["p_up"] for r in rows]))
         if prop is not None:
             out.update(fit=fit, proposal_stays_up=float(np.mean([r["proposal_stays_up"] for r in rows])),
                        scaled_stays_up=float(np.mean([r["scaled_stays_up"] for r in rows])),

@@ -222,6 +222,22 @@ def test_incremental_first_kept_search_extends_the_chosen_offset_exactly(boxing_
     assert (True, True) in after_offset, after_offset
 
 
+@pytest.mark.realdata
+def test_a_fallen_fighter_loses_its_kept_rollout(setup):
+    """A rollout kept for incremental checks describes the body before its fall: a fighter that is
+    down (idle) forgets it, the other keeps its own."""
+    from tracker.bout_search import BoutSearchTracker
+    from tracker.policy import load_policy
+    s = SearchSettings(candidates=2, lookahead=3, seed=1, early_accept=True, incremental=True)
+    tracker = BoutSearchTracker(load_policy(), s)
+    bout = _guard_bout(setup, tracker)
+    _trace(bout, 3)                                   # one search each; the guards stand, plain accepted
+    assert all(sc._tail is not None for sc in tracker.searchers)
+    tracker.idle = [True, False]
+    tracker.act(bout.env, bout._obs)                  # the next search boundary
+    assert tracker.searchers[0]._tail is None and tracker.searchers[1]._tail is not None
+
+
 def test_aim_and_duel_spec():
     t = load_tracker("search:4,9:aim=2:duel")
     assert (t.aim, t.duel, t.s.candidates) == (2.0, True, 4)

@@ -274,6 +274,7 @@ class BoutSearchTracker:
             for k, sc in enumerate(self.searchers):
                 if self.idle is not None and self.idle[k]:
                     sc.delta = np.zeros_like(sc.delta)
+                    sc._tail = None           # a rollout kept for incremental checks is stale after this
                     continue
                 self._refresh_reward_ref(k, env.t)
                 sc.extra = self._aim_reward(env, k)

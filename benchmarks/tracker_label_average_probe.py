@@ -14,6 +14,9 @@ search's sigmas) are rolled out over the segment + look-ahead; per set:
   single offset's (how much averaging cancels).
 
     python benchmarks/tracker_label_average_probe.py [--walks 4] [--first 0] [--n 128] [--states 25] [--json-out F]
+    python benchmarks/tracker_label_average_probe.py --n 64 --states 250 --collect F.npz   # (observation, label) pairs
+    python benchmarks/tracker_label_average_probe.py --first 40 --n 16 --states 40 --proposal F.npz ...  # a ridge proposal played
+    python benchmarks/tracker_label_average_probe.py --scores A.npz,B.npz C.npz   # held-out fits, no simulation
 
 Prints one JSON line with the totals; --json-out keeps the per-state rows.
 """
@@ -147,6 +150,61 @@ def fit_proposal(files: list[str], alphas=(1.0, 10.0, 100.0, 1000.0, 10000.0)):
     return (W, b, mu, sd), dict(states=len(Z), held_out=len(Z) - cut, alpha=best, scores=scores)
 
 
+def held_out_scores(train: list[str], test: list[str], seed: int = 0) -> dict:
+    """How well the averaged labels of ``test`` (.npz from --collect) are predicted from their
+    observations by maps fitted on ``train``: held-out R^2 and mean cosine for ridge regression,
+    k nearest neighbours and a one-hidden-layer MLP (early-stopped on 15% of train)."""
+    import torch
+
+    def xy(files):
+        ds = [np.load(f) for f in files]
+        X, Y = np.concatenate([d["obs"] for d in ds]), np.concatenate([d["label"] for d in ds])
+        keep = np.concatenate([d["p_up"] > 0 for d in ds])
+        return X[keep], Y[keep]
+    Xtr, Ytr = xy(train)
+    Xte, Yte = xy(test)
+    mu, sd = Xtr.mean(0), Xtr.std(0) + 1e-6
+    Ztr, Zte = (Xtr - mu) / sd, (Xte - mu) / sd
+    ym, ys = Ytr.mean(0), Ytr.std(0) + 1e-9
+
+    def score(P):
+        r2 = 1.0 - ((Yte - P) ** 2).sum() / ((Yte - ym) ** 2).sum()
+        return [round(float(r2), 4), round(float(np.mean([_cos(p, y) for p, y in zip(P, Yte)])), 3)]
+    out = dict(train=len(Ztr), test=len(Zte))
+    for alpha in (1e2, 1e3, 1e4, 1e5):
+        W = np.linalg.solve(Ztr.T @ Ztr + alpha * np.eye(Ztr.shape[1]), Ztr.T @ (Ytr - ym))
+        out[f"ridge_{alpha:g}"] = score(Zte @ W + ym)
+    d2 = (Zte ** 2).sum(1)[:, None] - 2 * Zte @ Ztr.T + (Ztr ** 2).sum(1)[None]
+    order = np.argsort(d2, axis=1)
+    for k in (5, 20, 50):
+        out[f"knn_{k}"] = score(Ytr[order[:, :k]].mean(1))
+    torch.manual_seed(seed)
+    zt = torch.tensor(Ztr, dtype=torch.float32)
+    yt = torch.tensor((Ytr - ym) / ys, dtype=torch.float32)
+    cut = int(0.85 * len(zt))
+    for wd in (1e-3, 1e-2):
+        net = torch.nn.Sequential(torch.nn.Linear(zt.shape[1], 128), torch.nn.Tanh(), torch.nn.Linear(128, yt.shape[1]))
+        opt = torch.optim.Adam(net.parameters(), 1e-3, weight_decay=wd)
+        best = (np.inf, None, -1)
+        for epoch in range(200):
+            perm = torch.randperm(cut)
+            for i in range(0, cut, 64):
+                j = perm[i:i + 64]
+                loss = ((net(zt[j]) - yt[j]) ** 2).mean()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+            with torch.no_grad():
+                v = float(((net(zt[cut:]) - yt[cut:]) ** 2).mean())
+            if v < best[0]:
+                best = (v, {k: x.clone() for k, x in net.state_dict().items()}, epoch)
+        net.load_state_dict(best[1])
+        with torch.no_grad():
+            P = net(torch.tensor(Zte, dtype=torch.float32)).numpy() * ys + ym
+        out[f"mlp_wd{wd:g}"] = score(P) + [best[2]]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--walks", type=int, default=4)
@@ -159,7 +217,12 @@ def main(argv=None) -> int:
     ap.add_argument("--collect", default="", help="record (observation, averaged label) at full searches into this .npz")
     ap.add_argument("--proposal", nargs="*", default=None,
                     help="fit a ridge proposal on these --collect files and test it at this run's full searches")
+    ap.add_argument("--scores", nargs=2, metavar=("TRAIN", "TEST"),
+                    help="comma-separated --collect files: held-out R^2 / cosine of ridge, kNN and MLP maps (no simulation)")
     a = ap.parse_args(argv)
+    if a.scores:
+        print(json.dumps(held_out_scores(a.scores[0].split(","), a.scores[1].split(","))))
+        return 0
     setup = make_setup(walk_source(None))
     if a.collect or a.proposal is not None:
         prop, fit = fit_proposal(a.proposal) if a.proposal else (None, None)

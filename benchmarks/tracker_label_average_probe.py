@@ -65,13 +65,16 @@ class ProbingSearch(SearchController):
         ret, kept, _ = self._score(env, obs, delta)
         return ret, kept
 
+    def _sample(self, env, obs, st) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """N random offsets (the search's sigmas) rolled out from st: offsets, returns, stayed up."""
+        deltas = self.probe_rng.normal(0.0, 1.0, (self.n, len(self.sig))) * self.sig
+        rk = [self._roll(env, obs, st, d) for d in deltas]
+        return deltas, np.array([r for r, _ in rk]), np.array([k for _, k in rk])
+
     def _probe(self, env, obs, st) -> dict:
         sets = []
         for _ in range(2):
-            deltas = self.probe_rng.normal(0.0, 1.0, (self.n, len(self.sig))) * self.sig
-            rk = [self._roll(env, obs, st, d) for d in deltas]
-            ret = np.array([r for r, _ in rk])
-            up = np.array([k for _, k in rk])
+            deltas, ret, up = self._sample(env, obs, st)
             w = np.exp((ret - ret.max()) / (self.tau * ret.std() + 1e-12))
             mppi = (w[:, None] * deltas).sum(0) / w.sum()
             mean_up = deltas[up].mean(0) if up.any() else np.zeros(len(self.sig))
@@ -107,46 +110,48 @@ class CollectingSearch(ProbingSearch):
             row["proposal_stays_up"] = bool(self._roll(env, obs, st, guess)[1])
             row["scaled_stays_up"] = bool(self._roll(env, obs, st, 2.0 * guess)[1])
             row["const_stays_up"] = bool(self._roll(env, obs, st, b)[1])      # the mean label, whatever the state
-        deltas = self.probe_rng.normal(0.0, 1.0, (self.n, len(self.sig))) * self.sig
-        up = np.array([self._roll(env, obs, st, d)[1] for d in deltas])
+        deltas, _, up = self._sample(env, obs, st)
         row.update(label=deltas[up].mean(0) if up.any() else np.zeros(len(self.sig)), p_up=float(up.mean()))
         return row
 
 
 def _save_labels(path: str, rows: list[dict]) -> None:
     """The collected (observation, label, p_up) rows as .npz, written atomically."""
-    import os
-    tmp = f"{path}.tmp.npz"
-    np.savez(tmp, obs=np.array([r["obs"] for r in rows]), label=np.array([r["label"] for r in rows]),
-             p_up=np.array([r["p_up"] for r in rows]))
-    os.replace(tmp, path)
+    from motion_graph.atomic import atomic_write
+    atomic_write(path, lambda fh: np.savez(fh, obs=np.array([r["obs"] for r in rows]),
+                                           label=np.array([r["label"] for r in rows]),
+                                           p_up=np.array([r["p_up"] for r in rows])))
+
+
+def _load_labels(files: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Observations and labels of --collect files, the states where some offset stayed up."""
+    ds = [np.load(f) for f in files]
+    keep = np.concatenate([d["p_up"] > 0 for d in ds])
+    return np.concatenate([d["obs"] for d in ds])[keep], np.concatenate([d["label"] for d in ds])[keep]
+
+
+def _ridge(Z: np.ndarray, Y: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ridge regression Y ~ Z W + b (b the mean of Y, not penalised)."""
+    b = Y.mean(0)
+    return np.linalg.solve(Z.T @ Z + alpha * np.eye(Z.shape[1]), Z.T @ (Y - b)), b
 
 
 def fit_proposal(files: list[str], alphas=(1.0, 10.0, 100.0, 1000.0, 10000.0)):
     """Ridge map standardised observation -> averaged label, alpha by held-out R^2 (the files'
     last fifth of states held out); returns (W, b, mu, sd) refitted on all, and the scores."""
-    data = [np.load(f) for f in files]
-    X = np.concatenate([d["obs"] for d in data])
-    Y = np.concatenate([d["label"] for d in data])
-    keep = np.concatenate([d["p_up"] > 0 for d in data])
-    X, Y = X[keep], Y[keep]
+    X, Y = _load_labels(files)
     mu, sd = X.mean(0), X.std(0) + 1e-6
     Z = (X - mu) / sd
     cut = int(0.8 * len(Z))
-
-    def ridge(Z, Y, alpha):
-        b = Y.mean(0)
-        W = np.linalg.solve(Z.T @ Z + alpha * np.eye(Z.shape[1]), Z.T @ (Y - b))
-        return W, b
     scores = {}
     for alpha in alphas:
-        W, b = ridge(Z[:cut], Y[:cut], alpha)
+        W, b = _ridge(Z[:cut], Y[:cut], alpha)
         P = Z[cut:] @ W + b
         r2 = 1.0 - ((Y[cut:] - P) ** 2).sum() / ((Y[cut:] - Y[:cut].mean(0)) ** 2).sum()
         cos = np.mean([_cos(p, y) for p, y in zip(P, Y[cut:])])
         scores[alpha] = (float(r2), float(cos))
     best = max(scores, key=lambda k: scores[k][0])
-    W, b = ridge(Z, Y, best)
+    W, b = _ridge(Z, Y, best)
     return (W, b, mu, sd), dict(states=len(Z), held_out=len(Z) - cut, alpha=best, scores=scores)
 
 
@@ -156,13 +161,8 @@ def held_out_scores(train: list[str], test: list[str], seed: int = 0) -> dict:
     k nearest neighbours and a one-hidden-layer MLP (early-stopped on 15% of train)."""
     import torch
 
-    def xy(files):
-        ds = [np.load(f) for f in files]
-        X, Y = np.concatenate([d["obs"] for d in ds]), np.concatenate([d["label"] for d in ds])
-        keep = np.concatenate([d["p_up"] > 0 for d in ds])
-        return X[keep], Y[keep]
-    Xtr, Ytr = xy(train)
-    Xte, Yte = xy(test)
+    Xtr, Ytr = _load_labels(train)
+    Xte, Yte = _load_labels(test)
     mu, sd = Xtr.mean(0), Xtr.std(0) + 1e-6
     Ztr, Zte = (Xtr - mu) / sd, (Xte - mu) / sd
     ym, ys = Ytr.mean(0), Ytr.std(0) + 1e-9
@@ -172,8 +172,8 @@ def held_out_scores(train: list[str], test: list[str], seed: int = 0) -> dict:
         return [round(float(r2), 4), round(float(np.mean([_cos(p, y) for p, y in zip(P, Yte)])), 3)]
     out = dict(train=len(Ztr), test=len(Zte))
     for alpha in (1e2, 1e3, 1e4, 1e5):
-        W = np.linalg.solve(Ztr.T @ Ztr + alpha * np.eye(Ztr.shape[1]), Ztr.T @ (Ytr - ym))
-        out[f"ridge_{alpha:g}"] = score(Zte @ W + ym)
+        W, b = _ridge(Ztr, Ytr, alpha)
+        out[f"ridge_{alpha:g}"] = score(Zte @ W + b)
     d2 = (Zte ** 2).sum(1)[:, None] - 2 * Zte @ Ztr.T + (Ztr ** 2).sum(1)[None]
     order = np.argsort(d2, axis=1)
     for k in (5, 20, 50):

@@ -34,11 +34,11 @@ PAPER_CONFIG = {"next_threshold_m": 0.30, "options": {
     "max_samples": 200_000, "link_tol_r_m": 0.25, "link_tol_theta_rad": math.radians(45), "f0": 10}}
 
 
-def _child(cfg: dict) -> dict:
+def _child(cfg: dict) -> dict:  # runs in the child process (see _run)
     """One build in this process (called through a subprocess)."""
     import dataclasses
 
-    from igraph_fight.build import BuildOptions, build_graph, peak_rss_mb
+    from igraph_fight.build.pipeline import BuildOptions, build_graph, peak_rss_mb
     from motion_graph.library import load_library
 
     lib = load_library(cfg["library"])
@@ -64,10 +64,9 @@ def _child(cfg: dict) -> dict:
 
 
 def _run(cfg: dict) -> dict:
-    here = os.path.dirname(os.path.abspath(__file__))
-    code = ("import json,sys; sys.path.insert(0, %r); from bench_build import _child; "
-            "print('RESULT ' + json.dumps(_child(json.loads(sys.argv[1]))))" % here)
-    p = subprocess.run([sys.executable, "-c", code, json.dumps(cfg)], capture_output=True, text=True)
+    """One build in a fresh process (this script with --child), so peak memory is its own."""
+    p = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", json.dumps(cfg)], capture_output=True,
+                       text=True)
     for line in p.stdout.splitlines():
         if line.startswith("RESULT "):
             return json.loads(line[7:])
@@ -88,8 +87,8 @@ def compare_sklearn(root: str, folder: str, n_samples: int = 100_000) -> dict:
     import numpy as np
     from sklearn.cluster import KMeans
 
-    from igraph_fight import cluster, explore
-    from igraph_fight.build import BuildOptions
+    from igraph_fight.build import cluster, explore
+    from igraph_fight.build.pipeline import BuildOptions
     from igraph_fight.sim import SimTables
     from motion_graph.library import load_library
 
@@ -194,4 +193,7 @@ def _print(r: dict, as_json: bool) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        print("RESULT " + json.dumps(_child(json.loads(sys.argv[2]))), flush=True)
+    else:
+        main()

@@ -24,10 +24,8 @@ import statistics
 import sys
 import threading
 import time
-from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numba as nb  # noqa: E402
 import numpy as np  # noqa: E402

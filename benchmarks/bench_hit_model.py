@@ -1,4 +1,4 @@
-"""Decision cost of the physically calibrated IG fighter (tracker.hit_model) inside a physics bout.
+"""Decision cost of the physically calibrated IG fighter (tracker.bouts.hit_model) inside a physics bout.
 
     python benchmarks/bench_hit_model.py --graph G.igz [--seconds 60 --seed 1 --core 0]
 
@@ -38,9 +38,9 @@ def main(argv: list[str] | None = None) -> int:
     import torch
     torch.set_num_threads(1)
     from igraph_fight.graph import load_graph
-    from tracker.bout import PhysicsBout
-    from tracker.bout_agents import load_tracker, make_agent
-    from tracker.bout_setup import BoutConfig, BoutSetup
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.loaders import load_tracker, make_agent
+    from tracker.bouts.setup import BoutConfig, BoutSetup
     g = load_graph(a.graph)
     lib = g.load_library()
     setup = BoutSetup.create(lib)
@@ -79,10 +79,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _spread(a, g, lib, setup, trk) -> int:
     from igraph_fight.controller import MT_POS, MT_VALUE
-    from tracker.bout import PhysicsBout
-    from tracker.bout_agents import make_agent
-    from tracker.bout_setup import BoutConfig
-    from tracker.hit_model import phys_fighter
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.loaders import make_agent
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.hit_model import phys_fighter
     out = {}
     for future in ("kinematic", "calibrated"):
         agent = phys_fighter(g, lib, a.style, 5, None, future)

@@ -1,4 +1,4 @@
-"""Real-time factor of a full physics bout on one core (tracker.bout), rendering excluded.
+"""Real-time factor of a full physics bout on one core (tracker.bouts.physics_bout), rendering excluded.
 
     python benchmarks/bench_physics_bout.py --graph G.igz [--tracker CKPT|pd] [--seconds 60] [--seed 1]
         [--a infighter --b outboxer] [--core 0] [--repeat 1] [--json]
@@ -17,12 +17,10 @@ import json
 import os
 import sys
 import time
-from pathlib import Path
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,7 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     import torch
     torch.set_num_threads(1)
     from igraph_fight.graph import load_graph
-    from tracker.bout import BoutConfig, BoutSetup, PhysicsBout, load_tracker, make_agent
+    from tracker.bouts.setup import BoutConfig, BoutSetup
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.loaders import load_tracker, make_agent
 
     g = load_graph(a.graph)
     lib = g.load_library()
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
             orig(*args, **kw)
             step_s[0] += time.perf_counter() - t0
 
-        import tracker.env as tenv
+        import tracker.track.env as tenv
         tenv.mujoco.mj_step = timed
         try:
             load0 = os.getloadavg()

@@ -21,16 +21,14 @@ import argparse
 import os
 import sys
 import time
-from pathlib import Path
 
 if "--no-passive" not in sys.argv:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numba as nb  # noqa: E402
 import numpy as np  # noqa: E402
 
-from planner import SearchGraph, Style, compute_policy, synthetic_graph  # noqa: E402
+from planner import SearchGraph, Style, compute_policy, synthetic_graph
 
 PAPER_S, PAPER_E = 79_855, 3_392_297
 KINDS = ("jab", "straight", "hook", "uppercut", "kick", "duck", "dodge", "step_forward", "step_back",

@@ -9,7 +9,7 @@ Measures, pinned to one CPU core (os.sched_setaffinity) with one BLAS thread:
   without stopping at falls (so fallen bodies with many floor contacts are included);
 - real-time factor = simulated seconds / wall seconds; "per fighter" for the two-fighter scene
   is the scene's factor (both fighters advance together).
-Target (issue 6): >= 5x per fighter with the controller in the loop.
+Target: >= 5x per fighter with the controller in the loop.
 """
 from __future__ import annotations
 
@@ -19,26 +19,17 @@ import os
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from tracker.env import EnvConfig, TrackingEnv  # noqa: E402
-from tracker.evaluate import draw_walks  # noqa: E402
-from tracker.model import ModelOptions, build_fighter_scene  # noqa: E402
-from tracker.pd import PDController  # noqa: E402
-from tracker.reference import build_reference, placement_transform  # noqa: E402
-from tracker.spec import fighter_spec  # noqa: E402
-from tracker.walks import LibraryWalks, default_library  # noqa: E402
+import numpy as np
 
 
 def control_loop(scene, refs, seconds: float) -> dict:
+    from tracker.track.env import EnvConfig, TrackingEnv
+    from tracker.track.pd import PDController
     env = TrackingEnv(scene, replace(EnvConfig(), terminate_on_fall=False))
     pd = PDController()
     obs = env.reset(refs, 0)
@@ -57,7 +48,7 @@ def control_loop(scene, refs, seconds: float) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--physics-hz", type=float, default=240.0)
     ap.add_argument("--walks", type=int, default=3)
@@ -67,6 +58,13 @@ def main(argv=None) -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     except (AttributeError, OSError):
         pass
+    import mujoco
+
+    from tracker.body.humanoid import ModelOptions, build_fighter_scene
+    from tracker.body.spec import fighter_spec
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.reference import build_reference, placement_transform
+    from tracker.track.walks import LibraryWalks, default_library
     src = LibraryWalks(default_library())
     spec = fighter_spec(src.skeleton, src.calibration_motions())
     opts = replace(ModelOptions(), physics_hz=a.physics_hz)

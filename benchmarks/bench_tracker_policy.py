@@ -7,7 +7,7 @@ Pinned to one CPU core with one BLAS / torch thread. For the shipped policy (or 
 - the control loop (act + TrackingEnv.step, 30 Hz control, 240 Hz physics) of one fighter over
   library walks, and of two fighters in one scene (the policy batched over both), simulated for
   ``--seconds`` each without stopping at falls; PD-only in the same loop for comparison.
-Target (issue 7): >= 5x real time per fighter on one core.
+Target: >= 5x real time per fighter on one core.
 """
 from __future__ import annotations
 
@@ -17,25 +17,14 @@ import os
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-
-from tracker.env import EnvConfig, TrackingEnv  # noqa: E402
-from tracker.evaluate import draw_walks  # noqa: E402
-from tracker.model import ModelOptions, build_fighter_scene  # noqa: E402
-from tracker.pd import PDController  # noqa: E402
-from tracker.policy import load_policy  # noqa: E402
-from tracker.reference import build_reference, placement_transform  # noqa: E402
-from tracker.spec import fighter_spec  # noqa: E402
-from tracker.walks import walk_source  # noqa: E402
 
 
 def control_loop(scene, refs, controller, seconds: float) -> dict:
+    from tracker.track.env import EnvConfig, TrackingEnv
     env = TrackingEnv(scene, replace(EnvConfig(), terminate_on_fall=False))
     obs = env.reset(refs, 0)
     controller.reset(env)
@@ -57,7 +46,7 @@ def control_loop(scene, refs, controller, seconds: float) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--walks", type=int, default=3)
     ap.add_argument("--library", default=None)
@@ -68,6 +57,14 @@ def main(argv=None) -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     except (AttributeError, OSError):
         pass
+    from tracker.body.humanoid import ModelOptions, build_fighter_scene
+    from tracker.body.spec import fighter_spec
+    from tracker.track.env import TrackingEnv
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.pd import PDController
+    from tracker.track.policy_net import load_policy
+    from tracker.track.reference import build_reference, placement_transform
+    from tracker.track.walks import walk_source
     try:
         import torch
         torch.set_num_threads(1)

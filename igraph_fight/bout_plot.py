@@ -1,5 +1,5 @@
 """The figure shared by the kinematic and the physics bout plots: distance over time above
-cumulative hits (igraph_fight.match._plot_bout, tracker.bout_media._plot_physics)."""
+cumulative hits (igraph_fight.match and tracker.bouts.media)."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,12 +1,10 @@
 """Closing in: a geometric rule that turns a fighter towards its opponent and walks it into range
 before the Interaction Graph decides.
 
-Why: in physics bouts against the RL baseline the planner fighters spent about 80% of their
-decisions facing more than 1 rad away from the opponent, 2-3 m apart (tracker/BOUTS.md,
-twentieth session); the graph's values there differ between actions by less than their noise, so
-the min-max answer does not turn the fighter round. Raising the facing weight of Eq. 4 instead
-costs the kinematic bouts their hits (infighter vs outboxer over 20 bouts: w_theta 0.5 / 2 / 4
-scores +0.35 / -0.80 / -1.65 a bout).
+Why: far apart or facing away, the Interaction Graph's values differ between actions by less than
+their noise, so the min-max answer does not turn a fighter round; raising the facing weight of
+Eq. 4 instead costs the kinematic bouts their hits. The rule is what lets the planner fighters of
+a physics bout engage (figures: docs/results.md, "closing rule").
 
 The rule (``ClosingRule.choose``), for the action about to be launched, from the coupled state at
 the current action's end (distance r in metres, own facing error theta_self in radians, positive
@@ -27,20 +25,11 @@ when the opponent is to the left of the fighting direction):
   graph's loops (from a dodge whose only successors are itself and a jab it dodges on, turning
   away, for 20 actions).
 
-Measured on the default CMU boxing graph (``python benchmarks/closing_kinematic.py --graph G.igz
---a infighter|outboxer --b outboxer|infighter --bouts 40``, kinematic bouts of 60 s, the rule on
-A only): A's decisions facing more than 1 rad away 23% -> 8% (infighter) and 17% -> 6%
-(outboxer); score per bout -0.25 -> +0.55 for the infighter (paired +0.80, 95% -0.13 .. +1.73)
-and +1.80 -> +0.23 for the outboxer (paired -1.57, -3.54 .. +0.39: the outboxer's own table keeps
-its distance better than a rule that walks it back into 1.6 m). From 3 m facing away (1.5 or 2.8
-rad) the rule engages the fighter in 8.3 s on average (17 s at most) over the library's actions as
-starts, the opponent standing still: the library has no forward step, so closing in rides on
-straights and turns (0.1-0.3 m each). In physics bouts against the RL baseline (tracker/BOUTS.md,
-twentieth session) it is what lets the planner fighters land punches at all. In the
-infighter-against-outboxer physics bout it adds falls to the infighter (3.8 a
-minute with the rule on both fighters, 2.0 with it on the infighter only, 1.5 without; and with
-the rule on both, the two can circle each other, each stepping left, each taking the other to
-stand still: tracker/BOUTS.md, twenty-first session).
+Measured (``python -m research.probes.closing_kinematic``; figures in docs/results.md): the rule
+cuts the share of decisions facing more than 1 rad away about threefold and, from 3 m facing away,
+engages a fighter in about 8 s (the library has no forward step, so closing in rides on straights
+and turns). Known limits: it adds falls in physics bouts, and with the rule on both fighters the
+two can circle each other.
 
 Where an action ends comes from its library displacement (dx, dz metres in its own start frame,
 dheading radians). Named approximation: the opponent is taken to stand still while the sequence
@@ -74,7 +63,7 @@ class ClosingRule:
     first actions whose best sequences engage within this many seconds of the best count as tied;
     avoid: library ids the rule does not launch (unless the menu holds nothing else; the graph still
     may, and the look-ahead still passes through them): actions after which the physics fighters fell
-    often while closing in (``python -m tracker.fall_odds``)."""
+    often while closing in (``python -m research.fall_odds``)."""
 
     engage_r_m: float = 1.6
     engage_theta_rad: float = 1.0

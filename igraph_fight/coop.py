@@ -8,7 +8,7 @@ one of 8 directions of the pair frame (planner.rewards.cooperative_rewards).
 The graph has no midpoint features yet (docs/contracts.md: ``feat_mid_dx``, ``feat_mid_dz``), so
 :func:`midpoint_features` computes them: every edge is simulated once more from its source
 state's canonical sample with its action (the decider at the origin facing +Z, the other at
-(r, theta_self, theta_other) in its action and frame; sim._sample_world / sim._advance, exactly
+(r, theta_self, theta_other) in its action and frame; sim.sample_world / sim.advance_to_decision, exactly
 as the graph's builder and NPCController's lookahead simulate), and the displacement of the
 midpoint between the two pelvis ground points is expressed in the pair frame at the edge start
 (+Z from the decider towards the other, +X to its left). The same simulation gives the edge's
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import sim
-from .controller import _locate_p
-from .sim import _advance, _expand_one, _root, _sample_world
+from igraph_fight import sim
+from igraph_fight.locate import locate_packed
+from igraph_fight.sim import advance_to_decision, expand_one, root_pose, sample_world
 
 
 @njit(cache=True, inline="always")
@@ -39,8 +39,8 @@ def _midpoint_move(T, S, act, frm, r0, b):
     start (+Z towards the other, +X to its left; the other started at distance r0 and bearing b
     from the decider at the origin, heading 0), and the distance between the roots now.
     Returns (dx, dz, r) in metres."""
-    xa, za, _ = _root(T, S, act, frm, 0)
-    xb, zb, _ = _root(T, S, act, frm, 1)
+    xa, za, _ = root_pose(T, S, act, frm, 0)
+    xb, zb, _ = root_pose(T, S, act, frm, 1)
     dmx = 0.5 * (xa + xb) - 0.5 * r0 * np.sin(b)
     dmz = 0.5 * (za + zb) - 0.5 * r0 * np.cos(b)
     return (dmx * np.cos(b) - dmz * np.sin(b), dmx * np.sin(b) + dmz * np.cos(b),
@@ -57,10 +57,10 @@ def _mid_range(T, offsets, st_i, st_f, edge_action, out, lo, hi):
     stats = np.empty(sim.N_STAT)
     for s in range(lo, hi):
         for e in range(offsets[s], offsets[s + 1]):
-            _sample_world(T, st_i[s], st_f[s], edge_action[e], S, act, frm, mask)
+            sample_world(T, st_i[s], st_f[s], edge_action[e], S, act, frm, mask)
             for k in range(sim.N_STAT):
                 stats[k] = 0.0
-            _advance(T, S, act, frm, mask, stats)
+            advance_to_decision(T, S, act, frm, mask, stats)
             mx, mz, r_end = _midpoint_move(T, S, act, frm, st_f[s, 0], st_f[s, 1])
             out[e, 0] = mx
             out[e, 1] = mz
@@ -109,7 +109,7 @@ def _coop_lookahead(T, pi, pf, pc, V_self, V_other, gamma, rw, menu, si, sf):
     best_q = -np.inf
     for j in range(menu.shape[0]):
         a = menu[j]
-        d = _expand_one(T, si, sf, a, ci, cf, feat, S, act, frm, mask, stats)
+        d = expand_one(T, si, sf, a, ci, cf, feat, S, act, frm, mask, stats)
         mx, mz, _ = _midpoint_move(T, S, act, frm, sf[0], sf[1])
         r, ts, to = feat[sim.FT_R], feat[sim.FT_TH_SELF], feat[sim.FT_TH_OTHER]
         dur = max(feat[sim.FT_FRAMES] / rw[7], 1e-3)
@@ -118,7 +118,7 @@ def _coop_lookahead(T, pi, pf, pc, V_self, V_other, gamma, rw, menu, si, sf):
         w = (-rw[1] * (ts * ts + to * to) - rw[2] * (r - rw[0]) ** 2
              - rw[4] * (feat[sim.FT_DMG_GIVEN] + feat[sim.FT_DMG_RECEIVED])
              - rw[3] * ((vx - rw[5]) ** 2 + (vz - rw[6]) ** 2))
-        s, _, _, _ = _locate_p(pi, pf, pc, cf[0], cf[1], cf[2], ci[0], ci[1], ci[2], ci[3])
+        s, _, _, _ = locate_packed(pi, pf, pc, cf[0], cf[1], cf[2], ci[0], ci[1], ci[2], ci[3])
         v = 0.0
         if s >= 0:
             v = V_other[s] if d == 1 else V_self[s]
@@ -229,8 +229,8 @@ class CoopAgent:
         return self._rw
 
     def step(self, state, player: int) -> int:
-        from .controller import observe
-        from .state import to_sample
+        from igraph_fight.controller import observe
+        from igraph_fight.state import to_sample
 
         c = self.controller
         obs = observe(state, player)
@@ -242,7 +242,7 @@ class CoopAgent:
         if off and self.lookahead:
             si, sf = to_sample(state.game.tables, state.world, player)
             V_self, V_other = (p.V_a, p.V_b) if self.role == 0 else (p.V_b, p.V_a)
-            a, _ = _coop_lookahead(c._T, c._pi, c._pf, c._pc, V_self, V_other, p.gamma, self._weights(),
+            a, _ = _coop_lookahead(c.kernel_tables, *c.packed_index, V_self, V_other, p.gamma, self._weights(),
                                 np.ascontiguousarray(legal, dtype=np.int64), si.astype(np.int64), sf.astype(np.float64))
             if a >= 0:
                 return int(a)
@@ -344,7 +344,7 @@ def start_state(game, target_distance: float, rng: np.random.Generator):
 
 def play(game, agents, seconds: float, seed: int, target_distance: float):
     """One traced bout of two agents from :func:`start_state` (seeded); returns the BoutResult."""
-    from .match import run_bout
+    from igraph_fight.match import run_bout
 
     rng = np.random.default_rng(seed)
     init = start_state(game, target_distance, rng)

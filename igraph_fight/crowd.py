@@ -32,8 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from .controller import NPCController
-from .sim import _blocked, _open_mask, _relative, _root, _start_from_root, wrap
+from igraph_fight.controller import NPCController
+from igraph_fight.sim import strike_blocked, open_strike_mask, relative_pose, root_pose, start_from_root
+from motion_graph.rotations import wrap_angle_nb
 
 
 @dataclass
@@ -71,7 +72,7 @@ class CrowdReport:
 def _poses(T, S, act, frm, out):
     """Root poses (x, z, heading) of every fighter."""
     for i in range(S.shape[0]):
-        x, z, h = _root(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
+        x, z, h = root_pose(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
         out[i, 0] = x
         out[i, 1] = z
         out[i, 2] = h
@@ -114,16 +115,16 @@ def _observe(T, S, act, frm, mask, opp, who, out_f, out_i):
     for k in range(who.shape[0]):
         i = who[k]
         o = opp[i]
-        x0, z0, h0 = _root(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
-        x1, z1, h1 = _root(T, S[o:o + 1], act[o:o + 1], frm[o:o + 1], 0)
-        r, ts, to = _relative(x0, z0, h0, x1, z1, h1)
+        x0, z0, h0 = root_pose(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
+        x1, z1, h1 = root_pose(T, S[o:o + 1], act[o:o + 1], frm[o:o + 1], 0)
+        r, ts, to = relative_pose(x0, z0, h0, x1, z1, h1)
         out_f[k, 0] = r
         out_f[k, 1] = ts
         out_f[k, 2] = to
         out_i[k, 0] = act[i]
         out_i[k, 1] = act[o]
         out_i[k, 2] = frm[o]
-        out_i[k, 3] = _open_mask(T, act[o], frm[o], mask[o])
+        out_i[k, 3] = open_strike_mask(T, act[o], frm[o], mask[o])
 
 
 @njit(cache=True)
@@ -134,10 +135,10 @@ def _start(T, S, act, frm, mask, opp, who, actions, snap, snap_r, snap_ts):
     moved = 0.0
     for k in range(who.shape[0]):
         i = who[k]
-        x, z, h = _root(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
+        x, z, h = root_pose(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
         if snap[k]:
             o = opp[i]
-            xo, zo, _ = _root(T, S[o:o + 1], act[o:o + 1], frm[o:o + 1], 0)
+            xo, zo, _ = root_pose(T, S[o:o + 1], act[o:o + 1], frm[o:o + 1], 0)
             b = np.arctan2(xo - x, zo - z)
             nx = xo - snap_r[k] * np.sin(b)
             nz = zo - snap_r[k] * np.cos(b)
@@ -146,7 +147,7 @@ def _start(T, S, act, frm, mask, opp, who, actions, snap, snap_r, snap_ts):
             z = nz
             h = b - snap_ts[k]
         a = actions[k]
-        sx, sz, sh = _start_from_root(T, a, 0, x, z, wrap(h))
+        sx, sz, sh = start_from_root(T, a, 0, x, z, wrap_angle_nb(h))
         S[i, 0] = sx
         S[i, 1] = sz
         S[i, 2] = sh
@@ -159,7 +160,7 @@ def _start(T, S, act, frm, mask, opp, who, actions, snap, snap_r, snap_ts):
 @njit(cache=True)
 def _frame(T, S, act, frm, mask, opp, team, hits, defended, pose):
     """Advance every fighter one frame; push overlapping bodies apart; judge every active strike
-    against the attacker's opponent (sim._advance's rules). Fills ``pose``; returns the
+    against the attacker's opponent (sim.advance_to_decision's rules). Fills ``pose``; returns the
     deciders' count (fighters now at the last frame of their action)."""
     (n_frames, offs, path, eff, tgt, s_off, s_eff, s_w0, s_w1, s_dmg, d_w0, d_w1, rad2, dmin, max_frames, near2,
      arms, guard2, lead) = T
@@ -169,7 +170,7 @@ def _frame(T, S, act, frm, mask, opp, team, hits, defended, pose):
         if frm[i] < n_frames[act[i]] - 1:
             frm[i] += 1
     for i in range(n):
-        x, z, h = _root(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
+        x, z, h = root_pose(T, S[i:i + 1], act[i:i + 1], frm[i:i + 1], 0)
         pose[i, 0] = x
         pose[i, 1] = z
         pose[i, 2] = h
@@ -216,8 +217,8 @@ def _frame(T, S, act, frm, mask, opp, team, hits, defended, pose):
             e = eff[offs[a] + f, s_eff[k]]
             if guard2 > 0.0:
                 e0 = eff[offs[a] + f - 1, s_eff[k]] if f > 0 else e
-                if _blocked(arms, guard2, e0, e, ci, si, S[i, 0], S[i, 1], go, co, so, S[o, 0], S[o, 1]):
-                    mask[i] |= bit    # a forearm of the opponent blocks it (sim._advance's guard)
+                if strike_blocked(arms, guard2, e0, e, ci, si, S[i, 0], S[i, 1], go, co, so, S[o, 0], S[o, 1]):
+                    mask[i] |= bit    # a forearm of the opponent blocks it (sim.advance_to_decision's guard)
                     defended[o] += 1
                     continue
             if f < s_w0[k]:
@@ -310,7 +311,7 @@ class Crowd:
         self.mask = np.zeros(n, dtype=np.int64)
         self.S = np.zeros((n, 3))
         for i in range(n):
-            self.S[i] = _start_from_root(self.T, self.act[i], self.frm[i], pose[i, 0], pose[i, 1], pose[i, 2])
+            self.S[i] = start_from_root(self.T, self.act[i], self.frm[i], pose[i, 0], pose[i, 1], pose[i, 2])
         self.opp = np.full(n, -1, dtype=np.int64)
         self.pose = pose.copy()
         self.hits = np.zeros(n)

@@ -26,15 +26,15 @@ def run_demo(mocap: str | None = None, out: str | Path = "out/demo", seed: int =
     from motion_graph.library import LibraryParams, library_from_clips, segment_files
     from motion_graph.plot import plot_timelines
 
-    from .bouts import run_style_bout
-    from .build import BuildOptions, build_graph
-    from .cli_mocap import default_boxing_files
+    from igraph_fight.style_bout import run_style_bout
+    from igraph_fight.build.pipeline import BuildOptions, build_graph
+    from motion_graph.paths import boxing_files
 
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
-    files = default_boxing_files(mocap)
+    files = boxing_files(mocap)
     params = LibraryParams()
     clips = segment_files(files, params, progress=progress)
     lib = library_from_clips(clips, params)

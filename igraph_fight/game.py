@@ -21,8 +21,8 @@ import numpy as np
 
 from motion_graph.library import ActionLibrary
 
-from .sim import SimParams, SimTables
-from .state import EventResult, PaperState, WorldState, advance, perspective, relative, start_action
+from igraph_fight.sim import SimParams, SimTables
+from igraph_fight.state import EventResult, PaperState, WorldState, advance, perspective, relative, start_action
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class FightGame:
         return 2
 
     def new_initial_state(self, rng: np.random.Generator) -> "FightState":
-        """Random start (DESIGN.md 7): distance in init_distance_m, random headings, both fighters at
+        """Random start (docs/protocols.md, Match): distance in init_distance_m, random headings, both fighters at
         the last frame of a random guard action (both about to decide)."""
         lo, hi = self.config.init_distance_m
         r = float(rng.uniform(lo, hi))

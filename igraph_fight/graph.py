@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from motion_graph.rotations import wrap_angle
+
 from motion_graph.atomic import atomic_write
 from motion_graph.errors import LibraryFormatError
 
@@ -158,7 +160,7 @@ class InteractionGraph:
     def sim_params(self):
         """The kinematic simulator's options the graph was built with (a SimParams; the defaults
         for files that do not record them)."""
-        from .sim import SimParams
+        from igraph_fight.sim import SimParams
         opts = self.header.get("options", {}).get("sim")
         return SimParams(**opts) if opts else SimParams()
 
@@ -225,8 +227,8 @@ class InteractionGraph:
         s_r = float(opts.get("s_r_m", 0.5))
         s_t = float(opts.get("s_theta_rad", np.pi / 6))
         dr = a["state_r"][cand] - r
-        d1 = _wrap(a["state_theta_self"][cand] - theta_self)
-        d2 = _wrap(a["state_theta_other"][cand] - theta_other)
+        d1 = wrap_angle(a["state_theta_self"][cand] - theta_self)
+        d2 = wrap_angle(a["state_theta_other"][cand] - theta_other)
         d = (dr / s_r) ** 2 + (d1 / s_t) ** 2 + (d2 / s_t) ** 2
         i = int(np.lexsort((cand, d))[0])
         tr, tt = self._link_tolerance()
@@ -244,14 +246,14 @@ class InteractionGraph:
         if cand is None:
             return False
         tr, tt = self._link_tolerance()
-        ok = ((np.abs(a["state_r"][cand] - r) <= tr) & (np.abs(_wrap(a["state_theta_self"][cand] - theta_self)) <= tt)
-              & (np.abs(_wrap(a["state_theta_other"][cand] - theta_other)) <= tt))
+        ok = ((np.abs(a["state_r"][cand] - r) <= tr) & (np.abs(wrap_angle(a["state_theta_self"][cand] - theta_self)) <= tt)
+              & (np.abs(wrap_angle(a["state_theta_other"][cand] - theta_other)) <= tt))
         return bool(ok.any())
 
     def locate(self, tables, world, who: int) -> tuple[int, float, bool]:
         """nearest_state for avatar ``who`` of a live world (igraph_fight.state.WorldState) at its
         decision instant; ``tables`` are the simulator tables of the graph's library."""
-        from .state import to_sample
+        from igraph_fight.state import to_sample
         si, sf = to_sample(tables, world, who)
         return self.nearest_state(int(tables.nextset[si[0]]), int(si[1]), int(si[2]), int(si[3]), float(sf[0]),
                                   float(sf[1]), float(sf[2]))
@@ -385,9 +387,6 @@ def export_graphml(graph: InteractionGraph, path: str | os.PathLike) -> None:
     nx.write_graphml(g, buf)
     atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
-
-def _wrap(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 def header_summary(path: str | os.PathLike) -> dict:

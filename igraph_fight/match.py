@@ -15,8 +15,8 @@ from motion_graph.atomic import atomic_write_text
 from motion_graph.motion import Motion
 from motion_graph.rotations import matrix_to_quat, quat_to_matrix, yaw_matrix
 
-from .game import FightGame, FightState
-from .state import EventResult
+from igraph_fight.game import FightGame, FightState
+from igraph_fight.state import EventResult
 
 
 @dataclass
@@ -166,7 +166,7 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
     """Write log.jsonl, summary.json, distance.png, bout.html and A.bvh/B.bvh; returns their paths."""
     from motion_graph.io_bvh import save_bvh
 
-    from .viewer import write_bout_html
+    from igraph_fight.viewer import write_bout_html
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -215,7 +215,7 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
 
 
 def _plot_bout(result: BoutResult, path: Path, title: str) -> None:
-    from .bout_plot import cumulative_steps, distance_and_hits_figure, save_figure
+    from igraph_fight.bout_plot import cumulative_steps, distance_and_hits_figure, save_figure
     tr = result.trace
     fig, ax0, ax1 = distance_and_hits_figure(tr["t"], tr["distance"], "distance (m)",
                                              f"{title}: {result.names[0]} (A) vs {result.names[1]} (B)")

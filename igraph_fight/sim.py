@@ -26,12 +26,12 @@ its action (a decision instant). On every frame:
   ``guard_radius_m``). A strike whose fist meets a forearm before it touches a target resolves as
   *blocked*: a working defence of the other (counted as avoided), not a hit. Without it a punch
   passes through the arms that guard the head, which a physical opponent's arms do not allow
-  (tracker/BOUTS.md, sixteenth and seventeenth sessions). An approximation: the forearm is posed
+  (research/notes/BOUTS.md). An approximation: the forearm is posed
   at the current frame only, and the fist's path between frames is a straight line.
 
 Avatars are not interrupted by hits: the library has no hit-reaction mocap, so an interruption
 could only cut an action short and start another clip from a mid-motion pose. This is a design
-choice (see DESIGN.md section 3); the event features record every hit so rewards still see them.
+choice (docs/protocols.md); the event features record every hit so rewards still see them.
 
 The kernels take the library tables as one tuple (``SimTables.kernel_tuple``) so they compile once
 and are cached on disk. Batches run on ``workers`` Python threads over nogil kernels, each thread
@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+
+from motion_graph.rotations import wrap_angle_nb
 
 # Per-event statistics, avatar slots 0 and 1 (ST_* index into the stats vector).
 ST_FRAMES = 0     # frames advanced
@@ -241,7 +243,7 @@ class SimTables:
                          for n in self.target_names], dtype=np.float64)
 
     def kernel_tuple(self) -> tuple:
-        """The tables as the tuple every kernel takes (unpacked at the top of ``_advance``); the
+        """The tables as the tuple every kernel takes (unpacked at the top of ``advance_to_decision``); the
         guard's last three: arms, squared block distance (0: no guard), lead (frames)."""
         p = self.params
         arms = self.arms if self.arms is not None else np.zeros((len(self.path), 4, 3))
@@ -257,12 +259,6 @@ class SimTables:
 # ---------------------------------------------------------------------------------------------
 # Kernels
 # ---------------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def wrap(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
-
-
 @njit(cache=True, inline="always")
 def _seg_point_d2(px, py, pz, ax, ay, az, bx, by, bz):
     """Squared distance from point p to segment ab (m^2)."""
@@ -283,7 +279,7 @@ def _seg_point_d2(px, py, pz, ax, ay, az, bx, by, bz):
 
 
 @njit(cache=True, inline="always")
-def _blocked(arms, guard2, e0, e1, c, s, sx, sz, go, co, so, ox, oz):
+def strike_blocked(arms, guard2, e0, e1, c, s, sx, sz, go, co, so, ox, oz):
     """Whether the effector's path from e0 to e1 (action-frame points of the attacker, placed by
     cos/sin c, s and offset sx, sz) meets a forearm of the other's frame go (placed by co, so, ox,
     oz) within sqrt(guard2); the path is sampled at a third, two thirds and its end."""
@@ -305,7 +301,7 @@ def _blocked(arms, guard2, e0, e1, c, s, sx, sz, go, co, so, ox, oz):
 
 
 @njit(cache=True)
-def _advance(T, S, act, frm, mask, stats):
+def advance_to_decision(T, S, act, frm, mask, stats):
     """Advance both avatars to the next decision instant (in place).
 
     S (2, 3) start transforms (x, z, heading), act (2,), frm (2,), mask (2,) int64.
@@ -366,7 +362,7 @@ def _advance(T, S, act, frm, mask, stats):
                 go = offs[act[o]] + frm[o]
                 if guard2 > 0.0 and not resolved:
                     e0 = eff[offs[a] + f - 1, s_eff[k]] if f > 0 else e
-                    if _blocked(arms, guard2, e0, e, c[i], s[i], S[i, 0], S[i, 1], go, c[o], s[o], S[o, 0], S[o, 1]):
+                    if strike_blocked(arms, guard2, e0, e, c[i], s[i], S[i, 0], S[i, 1], go, c[o], s[o], S[o, 0], S[o, 1]):
                         mask[i] |= bit     # the fist meets a forearm first: a working defence of the other
                         resolved = True
                         stats[ST_REACH0 + i] += 1.0
@@ -412,7 +408,7 @@ def _advance(T, S, act, frm, mask, stats):
 
 
 @njit(cache=True, inline="always")
-def _root(T, S, act, frm, i):
+def root_pose(T, S, act, frm, i):
     """Current pelvis ground pose (x, z, heading) of avatar i."""
     offs = T[1]
     path = T[2]
@@ -425,7 +421,7 @@ def _root(T, S, act, frm, i):
 
 
 @njit(cache=True, inline="always")
-def _start_from_root(T, a, f, x, z, h):
+def start_from_root(T, a, f, x, z, h):
     """Start transform that puts action a's frame f at root pose (x, z, h)."""
     offs = T[1]
     path = T[2]
@@ -437,17 +433,17 @@ def _start_from_root(T, a, f, x, z, h):
 
 
 @njit(cache=True, inline="always")
-def _relative(x0, z0, h0, x1, z1, h1):
+def relative_pose(x0, z0, h0, x1, z1, h1):
     """(r, theta_self, theta_other) of avatar 0 with respect to avatar 1 (rad, wrapped)."""
     dx = x1 - x0
     dz = z1 - z0
     r = np.sqrt(dx * dx + dz * dz)
     b01 = np.arctan2(dx, dz)
-    return r, wrap(b01 - h0), wrap(b01 + np.pi - h1)
+    return r, wrap_angle_nb(b01 - h0), wrap_angle_nb(b01 + np.pi - h1)
 
 
 @njit(cache=True, inline="always")
-def _open_mask(T, a, f, m):
+def open_strike_mask(T, a, f, m):
     """Keep the bits of action a's strikes whose window has frames left after frame f."""
     s_off = T[5]
     s_w1 = T[8]
@@ -460,7 +456,7 @@ def _open_mask(T, a, f, m):
 
 
 @njit(cache=True, inline="always")
-def _sample_world(T, si, sf, action, S, act, frm, mask):
+def sample_world(T, si, sf, action, S, act, frm, mask):
     """World of a canonical sample whose decider (slot 0, at the origin facing +Z) starts
     ``action``; slot 1 is the other avatar in its action at its frame."""
     S[0, 0] = 0.0
@@ -473,10 +469,10 @@ def _sample_world(T, si, sf, action, S, act, frm, mask):
     ts = sf[SF_TH_SELF]
     x1 = r * np.sin(ts)
     z1 = r * np.cos(ts)
-    h1 = wrap(ts + np.pi - sf[SF_TH_OTHER])
+    h1 = wrap_angle_nb(ts + np.pi - sf[SF_TH_OTHER])
     b = si[SI_MOTHER]
     f = si[SI_FOTHER]
-    sx, sz, sh = _start_from_root(T, b, f, x1, z1, h1)
+    sx, sz, sh = start_from_root(T, b, f, x1, z1, h1)
     S[1, 0] = sx
     S[1, 1] = sz
     S[1, 2] = sh
@@ -489,13 +485,13 @@ def _sample_world(T, si, sf, action, S, act, frm, mask):
 def _canonical(T, S, act, frm, mask, d, out_i, out_f):
     """Canonical sample of the world from avatar d's perspective (d about to decide)."""
     o = 1 - d
-    x0, z0, h0 = _root(T, S, act, frm, d)
-    x1, z1, h1 = _root(T, S, act, frm, o)
-    r, ts, to = _relative(x0, z0, h0, x1, z1, h1)
+    x0, z0, h0 = root_pose(T, S, act, frm, d)
+    x1, z1, h1 = root_pose(T, S, act, frm, o)
+    r, ts, to = relative_pose(x0, z0, h0, x1, z1, h1)
     out_i[SI_MSELF] = act[d]
     out_i[SI_MOTHER] = act[o]
     out_i[SI_FOTHER] = frm[o]
-    out_i[SI_MASK] = _open_mask(T, act[o], frm[o], mask[o])
+    out_i[SI_MASK] = open_strike_mask(T, act[o], frm[o], mask[o])
     out_f[SF_R] = r
     out_f[SF_TH_SELF] = ts
     out_f[SF_TH_OTHER] = to
@@ -514,21 +510,21 @@ def _next_decider(T, act, frm):
 
 
 @njit(cache=True)
-def _expand_one(T, si, sf, action, ci, cf, feat, S, act, frm, mask, stats):
+def expand_one(T, si, sf, action, ci, cf, feat, S, act, frm, mask, stats):
     """Simulate a canonical sample's decider starting ``action`` up to the next decision.
     Writes the child's canonical sample (ci, cf) and the event features (slot-0 perspective);
     returns the next decider (0: the same avatar, 1: the other)."""
-    _sample_world(T, si, sf, action, S, act, frm, mask)
+    sample_world(T, si, sf, action, S, act, frm, mask)
     for k in range(N_STAT):
         stats[k] = 0.0
-    _advance(T, S, act, frm, mask, stats)
+    advance_to_decision(T, S, act, frm, mask, stats)
     d = _next_decider(T, act, frm)
     if d < 0:
         d = 0
     _canonical(T, S, act, frm, mask, d, ci, cf)
-    x0, z0, h0 = _root(T, S, act, frm, 0)
-    x1, z1, h1 = _root(T, S, act, frm, 1)
-    r, ts, to = _relative(x0, z0, h0, x1, z1, h1)
+    x0, z0, h0 = root_pose(T, S, act, frm, 0)
+    x1, z1, h1 = root_pose(T, S, act, frm, 1)
+    r, ts, to = relative_pose(x0, z0, h0, x1, z1, h1)
     n = stats[ST_FRAMES]
     feat[FT_FRAMES] = n
     feat[FT_R] = r
@@ -558,7 +554,7 @@ def _expand_range(T, si, sf, parent, action, ci, cf, feat, swap, lo, hi):
     stats = np.empty(N_STAT)
     for k in range(lo, hi):
         p = parent[k]
-        swap[k] = _expand_one(T, si[p], sf[p], action[k], ci[k], cf[k], feat[k], S, act, frm, mask, stats)
+        swap[k] = expand_one(T, si[p], sf[p], action[k], ci[k], cf[k], feat[k], S, act, frm, mask, stats)
 
 
 def expand_samples(T: tuple, si: np.ndarray, sf: np.ndarray, parent: np.ndarray, action: np.ndarray,
@@ -614,14 +610,14 @@ def advance_worlds(T, pose, act, frm, mask):
     S = np.empty((2, 3))
     for n in range(N):
         for i in range(2):
-            sx, sz, sh = _start_from_root(T, act[n, i], frm[n, i], pose[n, i, 0], pose[n, i, 1], pose[n, i, 2])
+            sx, sz, sh = start_from_root(T, act[n, i], frm[n, i], pose[n, i, 0], pose[n, i, 1], pose[n, i, 2])
             S[i, 0] = sx
             S[i, 1] = sz
             S[i, 2] = sh
-        _advance(T, S, act[n], frm[n], mask[n], stats[n])
+        advance_to_decision(T, S, act[n], frm[n], mask[n], stats[n])
         for i in range(2):
-            x, z, h = _root(T, S, act[n], frm[n], i)
+            x, z, h = root_pose(T, S, act[n], frm[n], i)
             pose[n, i, 0] = x
             pose[n, i, 1] = z
-            pose[n, i, 2] = wrap(h)
+            pose[n, i, 2] = wrap_angle_nb(h)
     return stats

@@ -19,8 +19,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import sim
-from .sim import SimTables
+from motion_graph.rotations import wrap_angle
+
+from igraph_fight import sim
+from igraph_fight.sim import SimTables
 
 
 class PaperState(NamedTuple):
@@ -108,7 +110,7 @@ def start_action(tables: SimTables, world: WorldState, who: int, action: int) ->
 
 
 def advance(tables: SimTables, world: WorldState) -> tuple[WorldState, EventResult]:
-    """Advance both avatars to the next decision instant (see sim._advance for the rules)."""
+    """Advance both avatars to the next decision instant (see sim.advance_to_decision for the rules)."""
     pose = world.pose_array()
     act = world.action[None].copy()
     frm = world.frame[None].copy()
@@ -135,8 +137,8 @@ def relative(world: WorldState, who: int) -> tuple[float, float, float]:
     dx = world.x[o] - world.x[who]
     dz = world.z[o] - world.z[who]
     b = np.arctan2(dx, dz)
-    return (float(np.hypot(dx, dz)), float(_wrap(b - world.heading[who])),
-            float(_wrap(b + np.pi - world.heading[o])))
+    return (float(np.hypot(dx, dz)), float(wrap_angle(b - world.heading[who])),
+            float(wrap_angle(b + np.pi - world.heading[o])))
 
 
 def perspective(tables: SimTables, world: WorldState, who: int) -> PaperState:
@@ -163,7 +165,7 @@ def worlds_to_samples(tables: SimTables, pose: np.ndarray, act: np.ndarray, frm:
     dx = pose[n, o, 0] - pose[n, d, 0]
     dz = pose[n, o, 1] - pose[n, d, 1]
     b = np.arctan2(dx, dz)
-    sf = np.stack([np.hypot(dx, dz), _wrap(b - pose[n, d, 2]), _wrap(b + np.pi - pose[n, o, 2])], axis=1)
+    sf = np.stack([np.hypot(dx, dz), wrap_angle(b - pose[n, d, 2]), wrap_angle(b + np.pi - pose[n, o, 2])], axis=1)
     ao, fo = act[n, o].astype(np.int64), frm[n, o].astype(np.int64)
     si = np.stack([act[n, d], ao, fo, open_mask(tables, ao, fo, mask[n, o])], axis=1).astype(np.int64)
     return si, sf
@@ -179,7 +181,7 @@ def samples_to_worlds(tables: SimTables, si: np.ndarray, sf: np.ndarray):
     r, ts, to = sf[:, sim.SF_R], sf[:, sim.SF_TH_SELF], sf[:, sim.SF_TH_OTHER]
     pose[:, 1, 0] = r * np.sin(ts)
     pose[:, 1, 1] = r * np.cos(ts)
-    pose[:, 1, 2] = _wrap(ts + np.pi - to)
+    pose[:, 1, 2] = wrap_angle(ts + np.pi - to)
     act = np.stack([si[:, sim.SI_MSELF], si[:, sim.SI_MOTHER]], axis=1).astype(np.int64)
     frm = np.stack([tables.n_frames[si[:, sim.SI_MSELF]] - 1, si[:, sim.SI_FOTHER]], axis=1).astype(np.int64)
     mask = np.zeros((N, 2), dtype=np.int64)
@@ -225,6 +227,3 @@ def group_key(tables: SimTables, si: np.ndarray, f0: int) -> np.ndarray:
     return np.stack([tables.nextset[si[:, sim.SI_MSELF]], si[:, sim.SI_MOTHER], si[:, sim.SI_FOTHER] // f0,
                      si[:, sim.SI_MASK]], axis=1)
 
-
-def _wrap(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi

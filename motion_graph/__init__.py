@@ -2,16 +2,16 @@
 
 Conventions: metres, Y up, heading about +Y (0 faces +Z, +X is left), quaternions (x, y, z, w).
 """
-from .classify import ATTACK_KINDS, DEFENCE_KINDS, KINDS, MOVE_KINDS
-from .errors import LibraryFormatError, MocapFormatError
-from .io import find_mocap_files, load_motion
-from .io_asfamc import load_asf, load_asf_amc
-from .io_bvh import load_bvh, save_bvh
-from .library import ActionLibrary, LibraryParams, build_library, load_library, segment_files
-from .motion import Motion, forward_kinematics
-from .paths import find_mocap_root
-from .semantics import resolve_parts
-from .skeleton import Skeleton
+from motion_graph.classify import ATTACK_KINDS, DEFENCE_KINDS, KINDS, MOVE_KINDS
+from motion_graph.errors import LibraryFormatError, MocapFormatError
+from motion_graph.io import find_mocap_files, load_motion
+from motion_graph.io_asfamc import load_asf, load_asf_amc
+from motion_graph.io_bvh import load_bvh, save_bvh
+from motion_graph.library import ActionLibrary, LibraryParams, build_library, load_library, segment_files
+from motion_graph.motion import Motion, forward_kinematics
+from motion_graph.paths import find_mocap_root
+from motion_graph.semantics import resolve_parts
+from motion_graph.skeleton import Skeleton
 
 __all__ = [
     "ATTACK_KINDS", "DEFENCE_KINDS", "KINDS", "MOVE_KINDS", "LibraryFormatError", "MocapFormatError",

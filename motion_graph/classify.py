@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LibraryFormatError
-from .features import ClipFeatures, to_local
-from .rotations import wrap_angle
-from .strikes import Strike
+from motion_graph.errors import LibraryFormatError
+from motion_graph.features import ClipFeatures, to_local
+from motion_graph.rotations import wrap_angle
+from motion_graph.strikes import Strike
 
 ATTACK_KINDS = ("jab", "straight", "hook", "uppercut", "kick")
 DEFENCE_KINDS = ("duck", "dodge")

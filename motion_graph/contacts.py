@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .features import ClipFeatures
+from motion_graph.features import ClipFeatures
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from .motion import Motion
-from .rotations import wrap_angle
-from .semantics import require_parts, resolve_parts
+from motion_graph.motion import Motion
+from motion_graph.rotations import wrap_angle
+from motion_graph.semantics import require_parts, resolve_parts
 
 SMOOTH_S = 0.02
 

@@ -15,7 +15,7 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-from . import paths
+from motion_graph import paths
 
 CMU_BASE_URL = "http://mocap.cs.cmu.edu/subjects"
 #: Environment variable that overrides the default base URL (e.g. a mirror).

@@ -4,10 +4,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .errors import MocapFormatError
-from .io_asfamc import load_asf_amc
-from .io_bvh import load_bvh
-from .motion import Motion
+from motion_graph.errors import MocapFormatError
+from motion_graph.io_asfamc import load_asf_amc
+from motion_graph.io_bvh import load_bvh
+from motion_graph.motion import Motion
 
 MOCAP_SUFFIXES = (".bvh", ".amc")
 
@@ -28,7 +28,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = None, metres_per_un
     if suf == ".amc":
         m = load_asf_amc(p, fps=fps or 120.0)
         if metres_per_unit is not None:
-            from .io_asfamc import load_amc, load_asf, find_asf_for
+            from motion_graph.io_asfamc import load_amc, load_asf, find_asf_for
             m = load_amc(p, load_asf(find_asf_for(p), metres_per_unit), fps or 120.0)
         return m
     raise MocapFormatError(str(p), f"unsupported file type {suf!r} (expected .bvh or .amc)")

@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MocapFormatError
-from .motion import Motion
-from .rotations import euler_to_matrix, matrix_to_quat
-from .skeleton import Skeleton
+from motion_graph.errors import MocapFormatError
+from motion_graph.motion import Motion
+from motion_graph.rotations import euler_to_matrix, matrix_to_quat
+from motion_graph.skeleton import Skeleton
 
 CMU_FPS = 120.0
 _DOF_ROT = {"rx": "X", "ry": "Y", "rz": "Z"}

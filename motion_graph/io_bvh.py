@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MocapFormatError
-from .motion import Motion, forward_kinematics
-from .rotations import euler_to_matrix, matrix_to_quat, quat_to_matrix
-from .skeleton import Skeleton
-from .units import guess_metres_per_unit
+from motion_graph.errors import MocapFormatError
+from motion_graph.motion import Motion, forward_kinematics
+from motion_graph.rotations import euler_to_matrix, matrix_to_quat, quat_to_matrix
+from motion_graph.skeleton import Skeleton
+from motion_graph.units import guess_metres_per_unit
 
 _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
@@ -262,5 +262,5 @@ def save_bvh(motion: Motion, path: str | os.PathLike, units_per_metre: float = 1
         cols.append(eul)
     data = np.concatenate(cols, axis=1)
     out.extend(" ".join(f"{v:.5f}" for v in row) for row in data)
-    from .atomic import atomic_write_text
+    from motion_graph.atomic import atomic_write_text
     atomic_write_text(path, "\n".join(out) + "\n")

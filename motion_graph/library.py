@@ -17,17 +17,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write_bytes
-from .classify import ATTACK_KINDS, DEFENCE_KINDS, KINDS, Annotation, ClassifyParams, annotate, load_label_file
-from .errors import LibraryFormatError, MocapFormatError
-from .features import clip_features
-from .io import find_mocap_files, load_motion
-from .motion import Motion, forward_kinematics
-from .rotations import matrix_to_quat, quat_to_matrix, slerp_quats, wrap_angle, yaw_matrix
-from .segment import SegmentParams, segment_clip
-from .semantics import resolve_parts
-from .skeleton import Skeleton
-from .strikes import StrikeParams, detect_strikes, stance_offset
+from motion_graph.atomic import atomic_write_bytes
+from motion_graph.classify import (
+    ATTACK_KINDS, DEFENCE_KINDS, KINDS, Annotation, ClassifyParams, annotate, load_label_file)
+from motion_graph.errors import LibraryFormatError, MocapFormatError
+from motion_graph.features import clip_features
+from motion_graph.io import find_mocap_files, load_motion
+from motion_graph.motion import Motion, forward_kinematics
+from motion_graph.rotations import matrix_to_quat, quat_to_matrix, slerp_quats, wrap_angle, yaw_matrix
+from motion_graph.segment import SegmentParams, segment_clip
+from motion_graph.semantics import resolve_parts
+from motion_graph.skeleton import Skeleton
+from motion_graph.strikes import StrikeParams, detect_strikes, stance_offset
 
 FORMAT = "igraph-fight/action-library"
 VERSION = 1
@@ -527,7 +528,7 @@ def _assemble(skel: Skeleton, parts: dict[str, int], rows: list[dict], params: L
         next_offsets=np.zeros(len(rows) + 1, dtype=np.int64), next_ids=np.zeros(0, dtype=np.int32),
         next_cost=np.zeros(0), meta={"params": params.to_json()},
     )
-    from .graph import compute_next, compute_next_hubs
+    from motion_graph.action_graph import compute_next, compute_next_hubs
     if params.next_method == "hubs":
         compute_next_hubs(lib, params.next_threshold_m)
     elif params.next_method == "threshold":

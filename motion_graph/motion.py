@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rotations import quat_to_matrix, slerp_quats
-from .skeleton import Skeleton
+from motion_graph.rotations import quat_to_matrix, slerp_quats
+from motion_graph.skeleton import Skeleton
 
 
 @dataclass

@@ -45,3 +45,19 @@ def boxing_takes(root: Path) -> list[Path]:
             return bvh
     amc = sorted(root.rglob("13_1[78].amc"))
     return amc
+
+
+def boxing_files(mocap: str | os.PathLike | None) -> list[Path]:
+    """The default boxing takes of the mocap folder (find_mocap_root(mocap)), or a MocapFormatError
+    saying where to get them."""
+    from motion_graph.errors import MocapFormatError
+
+    root = find_mocap_root(mocap)
+    if root is None or not root.is_dir():
+        raise MocapFormatError(str(root or "../shared/mocap"),
+                               f"no mocap folder; pass files, --mocap DIR, set {ENV_VAR}, "
+                               f"or run `igraph-fight data fetch-cmu`")
+    files = boxing_takes(root)
+    if not files:
+        raise MocapFormatError(str(root), "no CMU boxing takes (13_17, 13_18) in this folder")
+    return files

@@ -13,8 +13,8 @@ def plot_timelines(clips: list[dict], path: str | os.PathLike) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_write
-    from .classify import ATTACK_KINDS, DEFENCE_KINDS
+    from motion_graph.atomic import atomic_write
+    from motion_graph.classify import ATTACK_KINDS, DEFENCE_KINDS
 
     n = len(clips)
     fig, axes = plt.subplots(3 * n, 1, figsize=(18, 4.2 * n), sharex=False,

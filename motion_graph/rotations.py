@@ -9,6 +9,7 @@ Conventions used across the project:
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial.transform import Rotation
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
@@ -73,6 +74,15 @@ def wrap_angle(a: np.ndarray | float) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+@njit(cache=True, inline="always")
+def wrap_angle_nb(a: float) -> float:
+    """Wrap radians to [-pi, pi) inside numba kernels (floor form: a - 2 pi floor((a + pi) / 2 pi)).
+
+    The last bit can differ from :func:`wrap_angle` (modulo form); each caller keeps the form its
+    stored results were computed with."""
+    return a - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))
+
+
 def slerp_quats(q: np.ndarray, t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
     """Resample a (T, J, 4) quaternion track from times t_src to t_dst by spherical interpolation."""
     T, J, _ = q.shape
@@ -92,3 +102,34 @@ def slerp_quats(q: np.ndarray, t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarr
     w1 = np.where(small, u, np.sin(u * theta) / np.where(small, 1.0, sin_t))
     out = w0 * q0 + w1 * q1
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# scalar-first (w, x, y, z) quaternions, MuJoCo's order (the physics fighters, tracker.bouts)
+
+
+def yaw_quat_wxyz(h: float) -> np.ndarray:
+    """Rotation by h about +Z as a (w, x, y, z) quaternion (MuJoCo's z-up world)."""
+    return np.array([np.cos(h / 2), 0.0, 0.0, np.sin(h / 2)])
+
+
+def quat_mul_wxyz(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a (4,) times b (..., 4), quaternions (w, x, y, z)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
+
+
+def slerp_wxyz(q_to: np.ndarray, q_from: np.ndarray, w_from: float) -> np.ndarray:
+    """Per-row slerp of unit quaternions (N, 4): weight w_from on q_from (sign-aligned)."""
+    dot = (q_to * q_from).sum(-1)
+    q_from = np.where(dot[:, None] < 0, -q_from, q_from)
+    dot = np.abs(dot).clip(-1.0, 1.0)
+    th = np.arccos(dot)
+    s = np.sin(th)
+    small = s < 1e-6
+    a = np.where(small, 1.0 - w_from, np.sin((1.0 - w_from) * th) / np.where(small, 1.0, s))
+    b = np.where(small, w_from, np.sin(w_from * th) / np.where(small, 1.0, s))
+    q = a[:, None] * q_to + b[:, None] * q_from
+    return q / np.linalg.norm(q, axis=1, keepdims=True)

@@ -1,6 +1,6 @@
 """Cut a clip into actions at quiet double-support moments, never inside a strike.
 
-Measured on the CMU boxing takes (DESIGN.md section 2): strict double-support instants come
+Measured on the CMU boxing takes: strict double-support instants come
 about 2.5 times a second for this bouncing boxer, so cutting at each over-segments and halves
 punches. A cut is allowed only where both feet are planted, no strike is under way, both fists
 are back near guard, and the body is quiet (a local minimum of fist + pelvis + foot speed over a
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contacts import ContactParams, foot_contacts, runs
-from .features import ClipFeatures
-from .strikes import Strike
+from motion_graph.contacts import ContactParams, foot_contacts, runs
+from motion_graph.features import ClipFeatures
+from motion_graph.strikes import Strike
 
 
 @dataclass(frozen=True)

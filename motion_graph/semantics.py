@@ -12,8 +12,8 @@ import os
 import re
 from pathlib import Path
 
-from .errors import MocapFormatError
-from .skeleton import Skeleton
+from motion_graph.errors import MocapFormatError
+from motion_graph.skeleton import Skeleton
 
 PARTS = ("pelvis", "belly", "chest", "neck", "head", "head_top",
          "l_shoulder", "l_elbow", "l_wrist", "l_fist", "l_hip", "l_knee", "l_ankle", "l_toe",

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import find_peaks
 
-from .features import ClipFeatures
-from .rotations import wrap_angle
+from motion_graph.features import ClipFeatures
+from motion_graph.rotations import wrap_angle
 
 
 @dataclass(frozen=True)

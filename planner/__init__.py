@@ -9,17 +9,16 @@ Typical use (graph = dict of the contract arrays, kinds_table included)::
     e = pol.select(s, graph["state_offsets"], graph["edge_target"], graph["edge_swap"], rng,
                    temperature=0.5, usage=counts, penalty=0.3)           # roulette
 """
-from .dp import dp_packed, value_iteration, value_iteration_pair
-from .minmax import balanced_chunks, minmax, minmax_packed, pack_keys, pack_weights
-from .policy import DEFAULT_GAMMA, Policy, compute_policy
-from .rewards import (COOP_FEATURES, FIGHT_FEATURES, N_DIRECTIONS, cooperative_rewards, direction_vector,
-                      edge_rewards, kind_preferences)
-from .search_graph import ORDERINGS, SearchGraph
-from .select import (MODES, edge_scores, roulette_pick, roulette_probabilities, roulette_select,
-                     select_edge)
-from .styles import (ATTACK_KINDS, Style, StyleError, list_presets, load_style, save_style,
-                     style_from_dict)
-from .synthetic import random_features, synthetic_graph
+from planner.dp import dp_packed, value_iteration, value_iteration_pair
+from planner.minmax import balanced_chunks, minmax, minmax_packed, pack_keys, pack_weights
+from planner.policy import DEFAULT_GAMMA, Policy, compute_policy
+from planner.rewards import (
+    COOP_FEATURES, FIGHT_FEATURES, N_DIRECTIONS, cooperative_rewards, direction_vector, edge_rewards,
+    kind_preferences)
+from planner.search_graph import ORDERINGS, SearchGraph
+from planner.select import MODES, edge_scores, roulette_pick, roulette_probabilities, roulette_select, select_edge
+from planner.styles import ATTACK_KINDS, Style, StyleError, list_presets, load_style, save_style, style_from_dict
+from planner.synthetic_graph import random_features, synthetic_graph
 
 __all__ = [
     "DEFAULT_GAMMA",

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .minmax import balanced_chunks, pack_keys, pack_weights
+from planner.minmax import balanced_chunks, pack_keys, pack_weights
 
 
 @nb.njit(parallel=True, cache=True)

@@ -9,9 +9,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .search_graph import SearchGraph, _Threads
-from .select import edge_scores_local, roulette_select
-from .styles import Style, load_style
+from planner.search_graph import SearchGraph, NumbaThreads
+from planner.select import edge_scores_local, roulette_select
+from planner.styles import Style, load_style
 
 
 @dataclass(eq=False)
@@ -130,14 +130,14 @@ def compute_policy(graph_arrays: Mapping[str, np.ndarray], style: Style | str | 
                                                graph_arrays["edge_swap"], ordering=ordering)
         timings["prepare"] = search_graph.prepare_ms
     t = time.perf_counter()
-    with _Threads(n_threads):
+    with NumbaThreads(n_threads):
         W2 = search_graph.rewards(graph_arrays, st, kinds_table, np.float32)
     timings["rewards"] = (time.perf_counter() - t) * 1e3
     t = time.perf_counter()
     V2, V2prev, best2 = search_graph.minmax_packed(W2, depth, gamma, dead_end_value, n_threads)
     timings["search"] = (time.perf_counter() - t) * 1e3
     t = time.perf_counter()
-    with _Threads(n_threads):
+    with NumbaThreads(n_threads):
         V_me, V_opp = search_graph.unpack_values(V2)
         if depth > 1:
             V_me_next, V_opp_next = search_graph.unpack_values(V2prev)

@@ -24,7 +24,7 @@ from typing import Mapping, Sequence
 import numba as nb
 import numpy as np
 
-from .styles import ATTACK_KINDS, DISTANCE_FEATURES, Style
+from planner.styles import ATTACK_KINDS, DISTANCE_FEATURES, Style
 
 FIGHT_FEATURES: tuple[str, ...] = (
     "feat_duration", "feat_theta_self", "feat_theta_other", "feat_dmg_given", "feat_dmg_received",
@@ -52,7 +52,7 @@ def kind_preferences(style: Style, kinds_table: Sequence[str]) -> np.ndarray:
 
 
 @nb.njit(inline="always")
-def _fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
+def fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
                 d_p, w_theta, w_d, w_g, w_r, w_def, per_second):
     """(W_me, W_opp) of edge e (module docstring)."""
     dd = r[e] - d_p
@@ -76,7 +76,7 @@ def _fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
 def _fight_kernel(r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
                   d_p, w_theta, w_d, w_g, w_r, w_def, per_second, out_me, out_opp):
     for e in range(r.shape[0]):
-        me, opp = _fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
+        me, opp = fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
                               d_p, w_theta, w_d, w_g, w_r, w_def, per_second)
         out_me[e] = me
         out_opp[e] = opp
@@ -90,7 +90,7 @@ def fight_rewards_packed(edge_rank, r, th_s, th_o, dur, dg, dr, kind, okind, def
     non-finite rewards."""
     bad = 0
     for e in nb.prange(edge_rank.shape[0]):
-        me, opp = _fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
+        me, opp = fight_edge(e, r, th_s, th_o, dur, dg, dr, kind, okind, def_s, def_o, pref,
                               d_p, w_theta, w_d, w_g, w_r, w_def, per_second)
         i = edge_rank[e]
         W2[2 * i] = me
@@ -200,3 +200,11 @@ def cooperative_rewards(features: Mapping[str, np.ndarray], target_distance: flo
         ux, uz = direction_vector(k, n_directions)
         out.append((base - w_v * ((vx - speed * ux) ** 2 + (vz - speed * uz) ** 2)).astype(dtype))
     return out[0], out[1]
+
+
+def style_params(style: Style) -> np.ndarray:
+    """The style as the float vector the numba kernels take:
+    [d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second, distance is 'mean']."""
+    return np.array([style.d_p, style.w_theta, style.w_d, style.w_dmg_given, style.w_dmg_received, style.w_def,
+                     float(style.per_second), float(DISTANCE_FEATURES[style.distance] == "feat_r_mean")],
+                    dtype=np.float64)

@@ -13,15 +13,15 @@ from typing import Mapping, Sequence
 import numba as nb
 import numpy as np
 
-from .dp import check_dp_args, dp_packed
-from .minmax import balanced_chunks, minmax_packed, pack_keys, pack_weights
-from .rewards import fight_kernel_args, fight_rewards_packed
-from .styles import Style
+from planner.dp import check_dp_args, dp_packed
+from planner.minmax import balanced_chunks, minmax_packed, pack_keys, pack_weights
+from planner.rewards import fight_kernel_args, fight_rewards_packed
+from planner.styles import Style
 
 ORDERINGS: tuple[str, ...] = ("none", "bfs", "rcm")
 
 
-class _Threads:
+class NumbaThreads:
     """Run with ``n`` numba threads (None: leave as is), restoring the previous count after."""
 
     def __init__(self, n: int | None) -> None:
@@ -245,7 +245,7 @@ class SearchGraph:
         ``n_threads``: numba threads for this call (None: the current setting)."""
         if depth < 1:
             raise ValueError(f"depth must be >= 1, got {depth}")
-        with _Threads(n_threads) as nt:
+        with NumbaThreads(n_threads) as nt:
             return minmax_packed(self.offsets, self.key, W2, int(depth), float(gamma), self.chunks(nt),
                                  float(dead_end_value))
 
@@ -293,7 +293,7 @@ class SearchGraph:
         """planner.dp.value_iteration_pair on the prepared layout (float64); original indices."""
         check_dp_args(gamma, tol, max_iter)
         W2 = self.pack(W_a, W_b, np.float64)
-        with _Threads(n_threads) as nt:
+        with NumbaThreads(n_threads) as nt:
             V2, best2, it, err = dp_packed(self.offsets, self.key, W2, float(gamma), float(tol), int(max_iter),
                                            self.chunks(nt), float(dead_end_value))
         return (*self.unpack_values(V2), *self.unpack_best(best2), int(it), float(err))

@@ -12,7 +12,7 @@ _REPO = str(Path(__file__).resolve().parent.parent)
 if _REPO not in sys.path:
     sys.path.insert(0, _REPO)
 
-from motion_graph import paths  # noqa: E402
+from motion_graph import paths
 
 
 def _mocap_root_or_skip() -> Path:
@@ -56,7 +56,7 @@ def small_graph(boxing_library):
     """(graph, library): an Interaction Graph of the CMU boxing library built with the default
     options but only SMALL_GRAPH_SAMPLES samples (seed 0, one thread: deterministic). Uses the
     session fixture ``boxing_library`` (defined below)."""
-    from igraph_fight.build import BuildOptions, build_graph
+    from igraph_fight.build.pipeline import BuildOptions, build_graph
     graph, _ = build_graph(boxing_library, BuildOptions(max_samples=SMALL_GRAPH_SAMPLES, seed_bouts=0), seed=0, workers=1)
     return graph, boxing_library
 
@@ -80,7 +80,7 @@ def boxing_library(boxing_files):
 def tiny_graph_file(boxing_library, tmp_path_factory) -> Path:
     """A tiny Interaction Graph of the boxing library (3000 samples, a few seconds), saved with
     its library embedded."""
-    from igraph_fight.build import BuildOptions, build_graph
+    from igraph_fight.build.pipeline import BuildOptions, build_graph
     graph, _ = build_graph(boxing_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64, seed_bouts=0), seed=0)
     path = tmp_path_factory.mktemp("tiny_graph") / "tiny.igz"
     graph.save(path)

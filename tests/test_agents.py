@@ -12,7 +12,7 @@ from igraph_fight.agents.common import EventReward, as_style
 from igraph_fight.agents.gametree import GameTreeAgent, GameTreeSearch
 from igraph_fight.agents.human import HumanConfig, HumanProxyAgent
 from igraph_fight.agents.static import StaticAgent, dummy_tables, static_policy
-from igraph_fight.edge_features import edge_features
+from igraph_fight.build.edge_features import edge_features
 from igraph_fight.game import FightGame, FightState, GameConfig
 from igraph_fight.state import WorldState, to_sample
 from motion_graph.classify import KINDS
@@ -224,7 +224,7 @@ def test_human_proxy_perceives_the_positions_of_its_delay_ago(game):
 # ----- every baseline plays legal moves through a bout ------------------------------------------------
 def test_baselines_play_a_short_bout(game, tmp_path):
     from igraph_fight.match import run_bout
-    from igraph_fight.rl_train import RLConfig, train
+    from igraph_fight.learn.train_rl import RLConfig, train
     from igraph_fight.agents.rl import RLAgent
 
     ck = train(game, RLConfig(total_decisions=64, num_envs=2, num_steps=32, episode_seconds=4.0,

@@ -1,4 +1,4 @@
-"""The search tracker inside physics bouts (tracker/bout_search.py): its searches run on one-fighter
+"""The search tracker inside physics bouts (research/bout_search.py): its searches run on one-fighter
 copies and leave the bout untouched (one candidate = the plain policy's bout, bit for bit), a copy
 reproduces the bout's own continuation, a real search is deterministic and changes the bout, and
 the tracker spec parses; the cheaper search variants (SearchSettings.early_accept)."""
@@ -8,41 +8,43 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import facing_start, walk_qpos
 
-from tracker.bout_agents import load_tracker
-from tracker.search_controller import SearchSettings
+from research.bout_search import load_search_tracker
+from research.search_controller import SearchSettings
 
 
 def test_search_tracker_spec():
-    t = load_tracker("search")
+    t = load_search_tracker("search")
     assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse, t.s.heading_weight) == (16, 45, False, False, 1.0)
-    t = load_tracker("search:4,12:full:reuse:heading=0.5:yawtol=0.2")
+    t = load_search_tracker("search:4,12:full:reuse:heading=0.5:yawtol=0.2")
     assert (t.s.candidates, t.s.lookahead, t.s.early_accept, t.s.reuse) == (4, 12, False, True)
     assert (t.s.heading_weight, t.s.yaw_tol) == (0.5, 0.2)
-    t = load_tracker("search:early:incr:first")
+    t = load_search_tracker("search:early:incr:first")
     assert (t.s.early_accept, t.s.incremental, t.s.first_kept, t.s.reuse) == (True, True, True, False)
-    assert not t.s.up_first and load_tracker("search:early:upfirst").s.up_first
+    assert not t.s.up_first and load_search_tracker("search:early:upfirst").s.up_first
     with pytest.raises(ValueError, match="needs a number"):
-        load_tracker("search:heading=x")
+        load_search_tracker("search:heading=x")
     with pytest.raises(ValueError, match="candidates >= 1"):
-        load_tracker("search:0,12")
+        load_search_tracker("search:0,12")
     with pytest.raises(FileNotFoundError):
-        load_tracker("search:2,3:/nonexistent/policy.pt")
+        load_search_tracker("search:2,3:/nonexistent/policy.pt")
 
 
 @pytest.fixture(scope="module")
 def setup(boxing_library):
-    from tracker.bout import BoutSetup
+    from tracker.bouts.setup import BoutSetup
     return BoutSetup.create(boxing_library)
 
 
 def _guard_bout(setup, tracker, seconds=1.0, distance=3.0):
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from test_physics_bout import _facing_start
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
     lib = setup.library
     guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
     bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], tracker, BoutConfig(seconds=seconds))
-    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=distance))
+    bout.start(seed=0, initial=facing_start(setup, guards[0], distance=distance))
     return bout
 
 
@@ -56,8 +58,8 @@ def _trace(bout, steps):
 
 @pytest.mark.realdata
 def test_one_candidate_search_is_the_plain_bout_and_search_is_deterministic(setup):
-    from tracker.bout_search import BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     plain = _trace(_guard_bout(setup, load_policy()), 18)
     one = _trace(_guard_bout(setup, BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3))), 18)
     np.testing.assert_array_equal(plain, one)         # the searches never touch the bout's own state
@@ -74,8 +76,8 @@ def test_one_fighter_copy_reproduces_the_bout(setup):
     land within a millimetre of the bout's own three steps."""
     import mujoco
 
-    from tracker.bout_search import BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=3, lookahead=3, seed=0))
     bout = _guard_bout(setup, trk)
     _trace(bout, 3)
@@ -101,7 +103,7 @@ def test_one_fighter_copy_reproduces_the_bout(setup):
 def _scripted_search(settings, outcomes):
     """A SearchController whose rollouts are scripted: outcomes[k] = (return, kept, steps up) of
     candidate k; the env's state is not touched. Returns the controller and the candidates' offsets."""
-    from tracker.search_controller import SearchController
+    from research.search_controller import SearchController
     sc = SearchController(None, settings)
     sc.rng, sc.sig, sc.delta, sc._tail, sc.extra = np.random.default_rng(0), np.ones(2), np.zeros(2), None, None
     sc.stats = {"searches": 0, "full": 0, "none_up": 0, "fallen_chosen": 0}
@@ -115,7 +117,7 @@ def _scripted_search(settings, outcomes):
 
 
 def test_up_first_ranks_a_rollout_that_stays_up_above_a_better_return_that_falls():
-    from tracker.search_controller import UP
+    from research.search_controller import UP
     # the plain policy falls at step 20; candidate 1 pays more but falls at step 40; candidate 2 stays up
     outcomes = [(5.0, False, 20), (9.0, False, 40), (6.0, True, UP)]
     sc, tried = _scripted_search(SearchSettings(candidates=3), outcomes)
@@ -135,31 +137,30 @@ def test_up_first_ranks_a_rollout_that_stays_up_above_a_better_return_that_falls
     # what a bout's summary and a series' or RL evaluation's rows carry: copies, one per fighter
     from types import SimpleNamespace
 
-    from tracker.bout_run import search_stats
+    from tracker.bouts.run import search_stats
     stats = search_stats(SimpleNamespace(searchers=[sc, sc]))
     assert stats == [sc.stats, sc.stats] and stats[0] is not sc.stats
-    assert search_stats(load_tracker("pd")) is None
+    assert search_stats(load_search_tracker("pd")) is None
 
 
 @pytest.mark.realdata
 def test_early_accept_keeps_the_plain_policy_when_it_stays_up(boxing_library):
     """A 4-step look-ahead from a reference start never sees a fall: with early_accept every search
     stops at the plain candidate, so the walk is the plain policy's exactly."""
-    from tracker.evaluate import draw_walks, make_setup
-    from tracker.policy import load_policy
-    from tracker.search_controller import SearchController
-    from tracker.walks import LibraryWalks
-    from test_tracker_search import _qpos
+    from tracker.track.evaluation import draw_walks, make_setup
+    from tracker.track.policy_net import load_policy
+    from research.search_controller import SearchController
+    from tracker.track.walks import LibraryWalks
     st = make_setup(LibraryWalks(boxing_library))
     walk = draw_walks(st.source, 1, 3, 4)[0]
-    plain = _qpos(st, load_policy(), walk, steps=24)
-    early = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True)),
+    plain = walk_qpos(st, load_policy(), walk, steps=24)
+    early = walk_qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True)),
                   walk, steps=24)
-    full = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2)), walk, steps=24)
+    full = walk_qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2)), walk, steps=24)
     np.testing.assert_array_equal(plain[0], early[0])
     assert not np.array_equal(plain[0], full[0])
     # a heading reward without a yaw tolerance does not stop early acceptance (it once did: cos(inf))
-    early_h = _qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True,
+    early_h = walk_qpos(st, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, seed=2, early_accept=True,
                                                                        heading_weight=1.0)), walk, steps=24)
     np.testing.assert_array_equal(plain[0], early_h[0])
 
@@ -169,11 +170,10 @@ def test_incremental_early_search_is_the_early_search_exactly(boxing_library):
     """Extending the kept plain rollout one segment at a time gives the same walk as simulating the
     whole look-ahead again at every search (the walk's env is the one played, the policy
     deterministic); and some searches did try candidates (not all plain)."""
-    from tracker.evaluate import draw_walks, make_setup
-    from tracker.policy import load_policy
-    from tracker.search_controller import SearchController
-    from tracker.walks import LibraryWalks
-    from test_tracker_search import _qpos
+    from tracker.track.evaluation import draw_walks, make_setup
+    from tracker.track.policy_net import load_policy
+    from research.search_controller import SearchController
+    from tracker.track.walks import LibraryWalks
     st = make_setup(LibraryWalks(boxing_library))
     walk = draw_walks(st.source, 1, 3, 4)[0]
     s = SearchSettings(candidates=3, lookahead=9, seed=2, early_accept=True)
@@ -184,9 +184,9 @@ def test_incremental_early_search_is_the_early_search_exactly(boxing_library):
             outcomes.append(super()._extend(env))
             return outcomes[-1]
 
-    early = _qpos(st, SearchController(load_policy(), s), walk, steps=45)
-    incr = _qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=45)
-    plain = _qpos(st, load_policy(), walk, steps=45)
+    early = walk_qpos(st, SearchController(load_policy(), s), walk, steps=45)
+    incr = walk_qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=45)
+    plain = walk_qpos(st, load_policy(), walk, steps=45)
     np.testing.assert_array_equal(early[0], incr[0])
     assert early[1:] == incr[1:]
     assert not np.array_equal(early[0], plain[0])
@@ -198,11 +198,10 @@ def test_incremental_first_kept_search_extends_the_chosen_offset_exactly(boxing_
     """With first_kept, the chosen offset's rollout (the offset for one segment, the plain policy
     after it) is kept and extended like the plain one: the same walk as without incremental checks,
     with at least one extension made right after an offset was played."""
-    from tracker.evaluate import draw_walks, make_setup
-    from tracker.policy import load_policy
-    from tracker.search_controller import SearchController
-    from tracker.walks import LibraryWalks
-    from test_tracker_search import _qpos
+    from tracker.track.evaluation import draw_walks, make_setup
+    from tracker.track.policy_net import load_policy
+    from research.search_controller import SearchController
+    from tracker.track.walks import LibraryWalks
     st = make_setup(LibraryWalks(boxing_library))
     walk = draw_walks(st.source, 1, 3, 1)[0]
     s = SearchSettings(candidates=4, lookahead=24, seed=2, early_accept=True, first_kept=True)
@@ -215,8 +214,8 @@ def test_incremental_first_kept_search_extends_the_chosen_offset_exactly(boxing_
             after_offset.append((played, ok))
             return ok
 
-    ref = _qpos(st, SearchController(load_policy(), s), walk, steps=60)
-    incr = _qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=60)
+    ref = walk_qpos(st, SearchController(load_policy(), s), walk, steps=60)
+    incr = walk_qpos(st, Counting(load_policy(), replace(s, incremental=True)), walk, steps=60)
     np.testing.assert_array_equal(ref[0], incr[0])
     assert ref[1:] == incr[1:]
     assert (True, True) in after_offset, after_offset
@@ -226,8 +225,8 @@ def test_incremental_first_kept_search_extends_the_chosen_offset_exactly(boxing_
 def test_a_fallen_fighter_loses_its_kept_rollout(setup):
     """A rollout kept for incremental checks describes the body before its fall: a fighter that is
     down (idle) forgets it, the other keeps its own."""
-    from tracker.bout_search import BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     s = SearchSettings(candidates=2, lookahead=3, seed=1, early_accept=True, incremental=True)
     tracker = BoutSearchTracker(load_policy(), s)
     bout = _guard_bout(setup, tracker)
@@ -239,22 +238,22 @@ def test_a_fallen_fighter_loses_its_kept_rollout(setup):
 
 
 def test_aim_and_duel_spec():
-    t = load_tracker("search:4,9:aim=2:duel")
+    t = load_search_tracker("search:4,9:aim=2:duel")
     assert (t.aim, t.duel, t.s.candidates) == (2.0, True, 4)
     assert "opponent in the rollouts" in t.describe() and "aimed" in t.describe()
-    t = load_tracker("search")
+    t = load_search_tracker("search")
     assert (t.aim, t.duel, t.touch, t.aiming) == (0.0, False, 0.0, False)
     with pytest.raises(ValueError, match="aim= needs a number"):
-        load_tracker("search:aim=x")
-    t = load_tracker("search:touch=10:spread=2")
+        load_search_tracker("search:aim=x")
+    t = load_search_tracker("search:touch=10:spread=2")
     assert (t.aim, t.touch, t.aim_spread, t.aiming) == (0.0, 10.0, 2.0, True)
     assert "touch 10" in t.describe()
     with pytest.raises(ValueError, match="touch weight >= 0"):
-        load_tracker("search:touch=-1")
-    t = load_tracker("search:lead=2")
+        load_search_tracker("search:touch=-1")
+    t = load_search_tracker("search:lead=2")
     assert (t.lead, t.aiming) == (2.0, True) and "pelvis lead 2" in t.describe()
     with pytest.raises(ValueError, match="lead weight >= 0"):
-        load_tracker("search:lead=-1")
+        load_search_tracker("search:lead=-1")
 
 
 @pytest.mark.realdata
@@ -264,8 +263,8 @@ def test_duel_copy_leaves_the_bout_alone_and_reproduces_it_with_fighters_in_cont
     played offsets land within a millimetre of the bout's own."""
     import mujoco
 
-    from tracker.bout_search import BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     plain = _trace(_guard_bout(setup, load_policy(), distance=0.6), 12)
     one = _trace(_guard_bout(setup, BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3),
                                                       duel=True), distance=0.6), 12)
@@ -300,8 +299,8 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
     rollouts: the opponent's live geoms)."""
     import mujoco
 
-    from tracker.bout_search import BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=3), aim=2.0, duel=True, touch=5.0)
     bout = _guard_bout(setup, trk, distance=1.0)
     env = bout.env
@@ -310,7 +309,7 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
     f = trk._aim_reward(env, 0)
     du = trk._duel
     trk._load_duel(env)
-    from tracker.model import EFFECTOR_LABELS
+    from tracker.body.humanoid import EFFECTOR_LABELS
     for e in EFFECTOR_LABELS:      # one-fighter copies share the bout's fighter-0 fist ids (the solo aim reads them)
         assert np.array_equal(trk._solos[1].scene.fighters[0].geom_label[e], env.scene.fighters[0].geom_label[e])
     head = int(env.scene.fighters[1].geom_label["head"][0])
@@ -334,8 +333,8 @@ def test_aim_reward_rewards_a_fist_on_the_target(setup):
 def test_lead_reward_keeps_the_striker_on_its_reference(setup):
     """The lead term: about its weight with the striker's pelvis on its reference, from LEAD_IN_STEPS
     before the strike window to its end; near zero with the pelvis 0.3 m off; none earlier."""
-    from tracker.bout_search import LEAD_IN_STEPS, BoutSearchTracker
-    from tracker.policy import load_policy
+    from research.bout_search import LEAD_IN_STEPS, BoutSearchTracker
+    from tracker.track.policy_net import load_policy
     trk = BoutSearchTracker(load_policy(), SearchSettings(candidates=1, lookahead=30), duel=True, lead=2.0)
     bout = _guard_bout(setup, trk, distance=1.0)
     env = bout.env
@@ -356,9 +355,9 @@ def test_lead_reward_keeps_the_striker_on_its_reference(setup):
 
 
 def test_foresee_spec():
-    t = load_tracker("search:4,9:foresee")
+    t = load_search_tracker("search:4,9:foresee")
     assert t.foresee_steps == t.s.segment + 9 + 2 and "next actions foreseen" in t.describe()
-    assert load_tracker("search").foresee_steps == 0
+    assert load_search_tracker("search").foresee_steps == 0
 
 
 class _Foreseeing:
@@ -380,17 +379,18 @@ def test_foresight_guesses_the_next_actions_and_leaves_the_bout_alone(setup):
     """Foresight writes the scripted agents' next actions past their current ones (their peek
     copies the generator, so the guesses are the real decisions), and the bout played with it is
     the bout without it, bit for bit (the tracking policy never reads the guessed frames)."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.policy import load_policy
-    from test_physics_bout import _facing_start
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.track.policy_net import load_policy
 
     class Logged(MenuAgent):
         def __init__(self, name):
             super().__init__(name=name)
             self.peeks = []
 
-        def peek(self, ctx):
-            a = super().peek(ctx)
+        def peek(self, ctx, player):
+            a = super().peek(ctx, player)
             self.peeks.append((round(ctx.t_s, 4), a))
             return a
 
@@ -399,7 +399,7 @@ def test_foresight_guesses_the_next_actions_and_leaves_the_bout_alone(setup):
     traces, bouts = [], []
     for steps in (0, 48):
         bout = PhysicsBout(setup, [Logged("a"), Logged("b")], _Foreseeing(load_policy(), steps), BoutConfig(seconds=2.0))
-        bout.start(seed=3, initial=_facing_start(setup, guards[0], distance=2.5))
+        bout.start(seed=3, initial=facing_start(setup, guards[0], distance=2.5))
         f = bout.F[0]
         moving = np.abs(f.ref.qvel[f.t_dec_end + 1:f.t_dec_end + 20]).max()
         assert (moving > 0.05) == bool(steps), moving          # guessed motion, else the last frame held

@@ -1,4 +1,4 @@
-"""The closing rule (igraph_fight.closing) and its physics-bout wrapper (tracker.bout_agents.ClosingAgent)."""
+"""The closing rule (igraph_fight.closing) and its physics-bout wrapper (tracker.bouts.agents.ClosingAgent)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -56,7 +56,7 @@ def test_the_rule_leaves_an_engaged_fighter_to_the_graph_and_brings_a_far_one_ro
 @pytest.mark.realdata
 def test_closing_agent_takes_the_rule_when_disengaged_and_the_inner_agent_otherwise(boxing_library):
     from igraph_fight.controller import Observation
-    from tracker.bout_agents import ClosingAgent, DecisionContext, MenuAgent
+    from tracker.bouts.agents import ClosingAgent, DecisionContext, MenuAgent
 
     lib = boxing_library
     inner = MenuAgent([], "inner")
@@ -71,18 +71,19 @@ def test_closing_agent_takes_the_rule_when_disengaged_and_the_inner_agent_otherw
 
     far = ctx(3.0, 2.5)
     want = ClosingRule().choose(menu, 3.0, 2.5, lib)
-    assert agent.peek(far) == want and agent.closing == 0                  # peek counts nothing
-    assert agent.decide(far) == want and agent.closing == 1
+    assert agent.peek(far, 0) == want and agent.closing == 0                  # peek counts nothing
+    assert agent.step(far, 0) == want and agent.closing == 1
     near = ctx(1.0, 0.1)
-    guess = agent.peek(near)                                              # the inner agent's peek
-    assert agent.decide(near) == guess and agent.closing == 1
+    guess = agent.peek(near, 0)                                              # the inner agent's peek
+    assert agent.step(near, 0) == guess and agent.closing == 1
     assert agent.name == "inner+close"
 
 
 @pytest.mark.realdata
 def test_make_agent_reads_the_close_option(boxing_library, tiny_graph_file, tmp_path):
     import planner.presets
-    from tracker.bout_agents import ClosingAgent, make_agent
+    from tracker.bouts.agents import ClosingAgent
+    from tracker.bouts.loaders import make_agent
     ag = make_agent("infighter+close=1.4,0.8", str(tiny_graph_file), boxing_library, 2)
     assert isinstance(ag, ClosingAgent) and ag.rule == ClosingRule(engage_r_m=1.4, engage_theta_rad=0.8)
     assert ag.controller.style == "infighter"                              # the inner fighter's attributes
@@ -119,7 +120,7 @@ def test_the_rule_does_not_launch_avoided_actions_unless_nothing_else_is_legal(b
 def test_fall_odds_counts_falls_in_and_right_after_each_action(tmp_path):
     import json
 
-    from tracker.fall_odds import fall_odds, main
+    from research.fall_odds import fall_odds, main
     log = [  # fighter 0 plays 5 (0-1 s), 7 (1-2 s), 5 (2-3 s), 9 (3-4 s); falls at 1.5 s and 3.2 s
         {"type": "action", "t": 0.0, "player": 0, "action": 5}, {"type": "action", "t": 0.0, "player": 1, "action": 7},
         {"type": "action", "t": 1.0, "player": 0, "action": 7}, {"type": "fall", "t": 1.5, "player": 0},
@@ -140,7 +141,7 @@ def test_fall_odds_counts_falls_in_and_right_after_each_action(tmp_path):
 
 
 def test_physics_rl_styles_keep_the_closing_rules_commas():
-    from tracker.physics_rl import split_styles
+    from tracker.bouts.rl_eval import split_styles
     assert split_styles("infighter,outboxer") == ["infighter", "outboxer"]
     assert split_styles("infighter+close=1.4,0.8:avoid=7,60,outboxer+phys+close") == [
         "infighter+close=1.4,0.8:avoid=7,60", "outboxer+phys+close"]

@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from igraph_fight.controller import NPCController, Observation, _nextset_ids
+from igraph_fight.controller import NPCController, Observation
+from igraph_fight.locate import nextset_ids
 from planner import roulette_probabilities
 
 
@@ -74,7 +75,7 @@ def _brute_nearest(c: NPCController, o: Observation) -> tuple[int, float, int]:
     |F_other difference| < F0), then the same key at any frame, the same Next-set, anywhere;
     ties to the smallest state id (anywhere: the first in key order)."""
     a = c.graph.arrays
-    ns = _nextset_ids(c.library)[o.m_self]
+    ns = nextset_ids(c.library)[o.m_self]
     d = ((a["state_r"] - o.r) ** 2 * c._inv_sr2
          + (_wrap(a["state_theta_self"] - o.theta_self) ** 2 + _wrap(a["state_theta_other"] - o.theta_other) ** 2)
          * c._inv_st2)
@@ -302,13 +303,13 @@ def _exact2_reference(c: NPCController, o: Observation) -> np.ndarray:
     from planner import edge_rewards
 
     from igraph_fight import sim
-    from igraph_fight.edge_features import edge_features
+    from igraph_fight.build.edge_features import edge_features
     t = c._table
     style, g = t.style_obj, float(t.policy.gamma)
 
     def children(si, sf):
         acts = c.tables.menu(int(si[sim.SI_MSELF])).astype(np.int64)
-        ci, cf, ft, sw = sim.expand_samples(c._T, si[None], sf[None], np.zeros(len(acts), np.int64), acts)
+        ci, cf, ft, sw = sim.expand_samples(c.kernel_tables, si[None], sf[None], np.zeros(len(acts), np.int64), acts)
         w_me, w_opp = edge_rewards(edge_features(c.tables, np.full(len(acts), si[sim.SI_MOTHER]), acts, ft), style,
                                    list(KINDS))
         return acts, ci, cf, sw, w_me, w_opp

@@ -48,10 +48,10 @@ def test_midpoint_features_come_from_the_same_simulation_as_the_graph(setup):
                            a["state_mask_other"][s]], dtype=np.int64)
             sf = np.array([a["state_r"][s], a["state_theta_self"][s], a["state_theta_other"][s]])
             S, act, frm, mask = np.empty((2, 3)), np.empty(2, np.int64), np.empty(2, np.int64), np.empty(2, np.int64)
-            sim._sample_world(T, si, sf, int(a["edge_action"][e]), S, act, frm, mask)
-            x0 = [sim._root(T, S, act, frm, i)[:2] for i in (0, 1)]
-            sim._advance(T, S, act, frm, mask, np.zeros(sim.N_STAT))
-            x1 = [sim._root(T, S, act, frm, i)[:2] for i in (0, 1)]
+            sim.sample_world(T, si, sf, int(a["edge_action"][e]), S, act, frm, mask)
+            x0 = [sim.root_pose(T, S, act, frm, i)[:2] for i in (0, 1)]
+            sim.advance_to_decision(T, S, act, frm, mask, np.zeros(sim.N_STAT))
+            x1 = [sim.root_pose(T, S, act, frm, i)[:2] for i in (0, 1)]
             dm = 0.5 * (np.add(*x1) - np.add(*x0))
             b = a["state_theta_self"][s]
             assert dm @ [np.cos(b), -np.sin(b)] == pytest.approx(dx[e], abs=1e-12)

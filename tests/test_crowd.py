@@ -7,6 +7,7 @@ import pytest
 from igraph_fight import crowd as C
 from igraph_fight import sim
 from igraph_fight.controller import NPCController
+from motion_graph.rotations import wrap_angle_nb
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +90,7 @@ def test_two_fighter_crowd_frames_reproduce_the_pair_simulator(ctrls, guard_m):
         pose_ref, act_ref, frm_ref, mask_ref = pose0.copy(), act.copy(), frm.copy(), mask.copy()
         stats = sim.advance_worlds(T, pose_ref, act_ref, frm_ref, mask_ref)[0]
         # crowd: the same two fighters, frame by frame until one of them stands at its last frame
-        S = np.array([sim._start_from_root(T, act[0, i], frm[0, i], *pose0[0, i]) for i in (0, 1)])
+        S = np.array([sim.start_from_root(T, act[0, i], frm[0, i], *pose0[0, i]) for i in (0, 1)])
         c_act, c_frm, c_mask = act[0].copy(), frm[0].copy(), mask[0].copy()
         opp, team = np.array([1, 0]), np.array([0, 1])
         hits, dfd, pose = np.zeros(2), np.zeros(2), np.zeros((2, 3))
@@ -119,4 +120,4 @@ def test_snapping_moves_on_graph_deciders_onto_their_state(ctrls):
     d = pose[1, :2] - pose[0, :2]
     assert np.hypot(*d) == pytest.approx(1.25, abs=1e-9)
     b = np.arctan2(d[0], d[1])
-    assert sim.wrap(b - pose[0, 2]) == pytest.approx(0.1, abs=1e-9)
+    assert wrap_angle_nb(b - pose[0, 2]) == pytest.approx(0.1, abs=1e-9)

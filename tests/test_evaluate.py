@@ -6,15 +6,17 @@ import json
 import numpy as np
 import pytest
 
-from igraph_fight.evaluate import EvalConfig, evaluate, mean_ci, tasks_for
+from igraph_fight.evaluate.config import EvalConfig
+from igraph_fight.evaluate.runner import evaluate, tasks_for
+from igraph_fight.stats import mean_ci
 
 
 @pytest.fixture(scope="module")
 def tiny(boxing_files, tmp_path_factory):
     """A small graph (with its library) and two tiny RL checkpoints (infighter, outboxer retrain)."""
-    from igraph_fight.build import BuildOptions, build_graph
+    from igraph_fight.build.pipeline import BuildOptions, build_graph
     from igraph_fight.game import FightGame, GameConfig
-    from igraph_fight.rl_train import RLConfig, train
+    from igraph_fight.learn.train_rl import RLConfig, train
     from motion_graph.library import build_library
 
     d = tmp_path_factory.mktemp("eval")

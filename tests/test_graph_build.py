@@ -10,8 +10,9 @@ import numba
 import numpy as np
 import pytest
 
-from igraph_fight import cluster, explore, sim, state
-from igraph_fight.build import BuildOptions, build_graph
+from igraph_fight.build import cluster, explore
+from igraph_fight import sim, state
+from igraph_fight.build.pipeline import BuildOptions, build_graph
 from igraph_fight.graph import GraphFormatError, InteractionGraph
 from igraph_fight.sim import SimTables
 from motion_graph.errors import LibraryFormatError
@@ -66,7 +67,7 @@ def test_initial_states_face_each_other_in_the_requested_share(tables):
 
 
 def test_bout_seed_states_are_reward_free_deterministic_canonical_samples(lib, tables):
-    from igraph_fight.seeding import bout_seed_states
+    from igraph_fight.build.seeding import bout_seed_states
     si, sf = bout_seed_states(lib, tables, 2, 10.0, seed=5)
     si2, sf2 = bout_seed_states(lib, tables, 2, 10.0, seed=5)
     assert len(si) > 10 and np.array_equal(si, si2) and np.array_equal(sf, sf2)
@@ -304,7 +305,7 @@ def test_cli_build_with_a_guard_records_it_for_every_user_of_the_graph(lib, tmp_
 
 
 def test_spatial_index_agrees_with_brute_force():
-    from igraph_fight import spatial
+    from igraph_fight.build import spatial
 
     rng = np.random.default_rng(0)
     N, f0, tr, tt = 4000, 3, 0.1, math.radians(20)

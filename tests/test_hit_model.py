@@ -1,4 +1,4 @@
-"""Physically measured hit odds (tracker.hit_model): the controller's per-action terms are the
+"""Physically measured hit odds (tracker.bouts.hit_model): the controller's per-action terms are the
 lookahead's, labels come from the right action instance and window, training recovers a planted
 rule, the agent scores with the odds, and collection -> training -> a physics bout runs end to end."""
 from __future__ import annotations
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from tracker.hit_model import HitModel, HitModelConfig, _label, load_data, train
+from tracker.bouts.hit_model import HitModel
+from tracker.learn.train_hit_model import HitModelConfig, label_decisions, load_data, train
 
 
 def test_labels_given_by_action_instance_and_received_inside_the_action_span():
@@ -17,7 +18,7 @@ def test_labels_given_by_action_instance_and_received_inside_the_action_span():
             {"attacker": 1, "victim": 0, "inst": 7, "frame": 9},        # fighter 0 hit during its 1st action
             {"attacker": 1, "victim": 0, "inst": 8, "frame": 30}]       # ... at its 2nd action's last step + 0
     falls = [{"player": 0, "t": 11 / 30}, {"player": 1, "t": 1 / 30}]
-    X, y, acts = _label(rows, 0, hits, nf, n_steps=100, falls=falls)
+    X, y, acts = label_decisions(rows, 0, hits, nf, n_steps=100, falls=falls)
     assert X == ["x0", "x1"]                       # the third runs past the bout's end: dropped
     # frame 30 = 10 + 20: outside [10, 30); fighter 0 fell at step 11, during its 2nd action
     assert y == [(False, True, False), (True, False, True)]
@@ -50,7 +51,7 @@ def test_training_recovers_a_planted_rule_on_held_out_bouts():
 
 def test_calibrated_style_scales_the_hit_terms_by_the_held_out_realisation_rates():
     from planner import load_style
-    from tracker.hit_model import calibrated_style
+    from tracker.bouts.hit_model import calibrated_style
     st = load_style("infighter")
     m = HitModel(None, np.zeros(1), np.ones(1), {"report": {"given": {"rate_when_kinematic_predicts": 0.2},
                                                             "received": {"rate_when_kinematic_predicts": 0.5}}})
@@ -62,7 +63,7 @@ def test_calibrated_style_scales_the_hit_terms_by_the_held_out_realisation_rates
 
 def test_kind_table_rates_per_action_kind():
     from types import SimpleNamespace
-    from tracker.hit_model import kind_table
+    from tracker.learn.train_hit_model import kind_table
     lib = SimpleNamespace(n_frames=[30, 15], labels=["jab", "guard"])
     data = {"action": np.array([0, 0, 1, 1]), "y": np.array([[1, 0, 1], [0, 0, 0], [0, 1, 1], [0, 0, 0]])}
     jab, guard = sorted(kind_table(data, lib), key=lambda r: r["kind"] != "jab")
@@ -73,7 +74,7 @@ def test_kind_table_rates_per_action_kind():
 
 
 def test_physical_edge_features_expect_hits_at_the_measured_rates():
-    from tracker.hit_model import physical_edge_features
+    from tracker.bouts.hit_model import physical_edge_features
     kind_names = ["jab", "guard"]
     action_kinds = np.array([0, 0, 1])            # two jab actions, one guard
     # per action: decisions / landed with a kinematic prediction, then without
@@ -101,11 +102,11 @@ def test_bad_sample_file_is_named(tmp_path):
 
 @pytest.mark.realdata
 def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_graph_file):
-    from igraph_fight.controller import (MT_ACTION, MT_DEF, MT_GIVEN, MT_POS, MT_RECEIVED, MT_VALUE, NPCController,
-                                         Observation)
+    from igraph_fight.controller import (
+        MT_ACTION, MT_DEF, MT_GIVEN, MT_POS, MT_RECEIVED, MT_VALUE, NPCController, Observation)
     from motion_graph.classify import KINDS
-    from tracker.bout_agents import DecisionContext
-    from tracker.hit_model import PhysIGAgent
+    from tracker.bouts.agents import DecisionContext
+    from tracker.bouts.hit_model import PhysIGAgent
     npc = NPCController(tiny_graph_file, style="infighter", depth=3)
     A = npc.library.n_actions
     rng = np.random.default_rng(0)
@@ -145,7 +146,7 @@ def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_grap
     others = np.arange(len(q0)) != j
     assert np.allclose(q1[others], q0[others])
     sure = PhysIGAgent(npc, model(80.0))
-    assert sure.peek(ctx) == sure.decide(ctx) == int(mt1[int(np.argmax(q1)), MT_ACTION])   # peek: decide, uncounted
+    assert sure.peek(ctx, 0) == sure.step(ctx, 0) == int(mt1[int(np.argmax(q1)), MT_ACTION])   # peek: step, uncounted
     assert sure.decisions == 1
     with pytest.raises(ValueError, match="future must be one of"):
         PhysIGAgent(npc, model(0.0), future="later")
@@ -158,8 +159,9 @@ def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_grap
 
 @pytest.mark.realdata
 def test_collect_train_and_play_a_physics_bout(tiny_graph_file, tmp_path):
-    from tracker.hit_model import collect, load_hit_model
-    from tracker.physics_rl import evaluate_vs_rl
+    from tracker.learn.train_hit_model import collect
+    from tracker.bouts.hit_model import load_hit_model
+    from tracker.bouts.rl_eval import evaluate_vs_rl
     out = tmp_path / "hits.npz"
     r = collect(str(tiny_graph_file), 2, out, seconds=2.0, seed0=5, workers=1, tracker="pd")
     d = load_data(out)
@@ -185,11 +187,11 @@ def test_collect_train_and_play_a_physics_bout(tiny_graph_file, tmp_path):
 @pytest.mark.realdata
 def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(boxing_library, tiny_graph_file):
     from planner import load_style
-    from tracker.bout_agents import make_agent
-    from tracker.hit_model import calibrated_style, load_hit_model
+    from tracker.bouts.loaders import make_agent
+    from tracker.bouts.hit_model import calibrated_style, load_hit_model
     m = load_hit_model()
     assert m.meta["n_actions"] == boxing_library.n_actions
-    # the documented data (twelfth session): 720 bouts of 60 s in four rounds, 20% of them held out
+    # the documented data (docs/tracker.md): 720 bouts of 60 s in four rounds, 20% of them held out
     assert m.meta["samples"] > 75_000 and len(m.meta["held_out_seeds"]) == 144
     rep = m.meta["report"]
     for head in ("given", "received"):
@@ -203,7 +205,7 @@ def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(
     agent.set_style("outboxer")                                # a run-time swap keeps the calibration
     assert agent.style.name == "outboxer" and agent.controller.style == "outboxer~phys"
     agent.controller.close()
-    from tracker.hit_model import phys_fighter                 # damages as physically expected
+    from tracker.bouts.hit_model import phys_fighter
     pf = phys_fighter(str(tiny_graph_file), boxing_library, "infighter", 2, m, future="physical")
     g = pf.controller.graph.arrays
     strike = np.isin(g["feat_kind"], [0, 1]) & (g["feat_dmg_given"] == 0)    # jabs / straights the simulator says miss

@@ -25,7 +25,7 @@ from igraph_fight import sim
 from igraph_fight.agents import IGAgent
 from igraph_fight.agents.gametree import GameTreeSearch
 from igraph_fight.controller import NPCController, observe
-from igraph_fight.edge_features import edge_features
+from igraph_fight.build.edge_features import edge_features
 from igraph_fight.game import FightGame, GameConfig
 from igraph_fight.state import WorldState, from_sample, to_sample
 from motion_graph.classify import KINDS

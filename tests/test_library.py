@@ -11,7 +11,7 @@ import pytest
 from motion_graph.errors import LibraryFormatError
 from motion_graph.io_bvh import load_bvh, save_bvh
 from motion_graph.library import build_library, load_library
-from motion_graph.synthetic import synthetic_boxer
+from motion_graph.synthetic_boxer import synthetic_boxer
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Physics bouts (tracker.bout): hits counted from fist contacts in a scripted scene, a short bout
+"""Physics bouts (tracker.bouts.physics_bout): hits counted from fist contacts in a scripted scene, a short bout
 that is deterministic for a seed and writes its artifacts, and the coupled state read from physics
 agreeing with the kinematic simulator when the bodies follow their references."""
 from __future__ import annotations
@@ -8,13 +8,14 @@ import json
 
 import numpy as np
 import pytest
+from helpers import facing_start
 
 pytestmark = pytest.mark.realdata
 
 
 @pytest.fixture(scope="module")
 def setup(boxing_library):
-    from tracker.bout import BoutSetup
+    from tracker.bouts.setup import BoutSetup
     return BoutSetup.create(boxing_library)
 
 
@@ -30,31 +31,22 @@ def _strike_action(lib):
     pytest.skip("no fist strike in the library")
 
 
-def _facing_start(setup, a_first: int, distance: float = 1.2):
-    """Fighter A at the origin facing B (heading 0 faces +Z), B facing A, both at the last frame of a
-    guard action from which A's punch is legal."""
-    lib = setup.library
-    guards = [g for g in range(lib.n_actions) if a_first in set(int(x) for x in lib.next(g))]
-    if not guards:
-        pytest.skip("no action leads to the punch")
-    g = guards[0]
-    return setup.game.initial_state((0.0, 0.0), (0.0, distance), (0.0, np.pi), (g, int(setup.game.start_actions[0])))
-
-
 def _scripted_punch(setup, overlap_m: float, arrive: str = "window"):
     """Drive A's punching fist kinematically (A's whole body teleported along a line, every control
     step, with the matching velocity) towards B's head until the fist sphere overlaps the head
     sphere by ``overlap_m`` (negative: stops that far short). B is simulated (PD). Returns the bout."""
     import mujoco
 
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.pd import PDController
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.track.pd import PDController
     lib = setup.library
     a, k, fist = _strike_action(lib)
     calm = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
     bout = PhysicsBout(setup, [MenuAgent([a], "puncher"), MenuAgent(calm, "target")], PDController(),
                        BoutConfig(seconds=2.0))
-    bout.start(seed=0, initial=_facing_start(setup, a))
+    bout.start(seed=0, initial=facing_start(setup, a))
     assert bout.decisions[0]["action"] == a
     m, d = bout.model, bout.env.data
     fA = bout.scene.fighters[0]
@@ -120,7 +112,7 @@ def _bout_args(graph, out, seed=3, seconds=3.0):
 
 
 def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_file, tmp_path, capsys):
-    from tracker.bout_cli import cmd_physics_fight
+    from tracker.bouts.cli import cmd_physics_fight
     runs = []
     for i in range(2):
         assert cmd_physics_fight(_bout_args(tiny_graph_file, tmp_path / f"run{i}")) == 0
@@ -141,7 +133,7 @@ def test_short_physics_bout_is_deterministic_and_writes_artifacts(tiny_graph_fil
 
 
 def test_wall_clock_budget_cuts_the_bout_and_the_summary_covers_what_was_played(tiny_graph_file, tmp_path, capsys):
-    from tracker.bout_cli import cmd_physics_fight
+    from tracker.bouts.cli import cmd_physics_fight
     args = _bout_args(tiny_graph_file, tmp_path / "cut")
     args.max_wall_s = 1e-9                   # exceeded after the first control step
     assert cmd_physics_fight(args) == 0
@@ -150,16 +142,18 @@ def test_wall_clock_budget_cuts_the_bout_and_the_summary_covers_what_was_played(
     dist = [json.loads(l) for l in (tmp_path / "cut" / "log.jsonl").read_text().splitlines()
             if json.loads(l)["type"] == "distance"]
     assert len(dist) == 1                    # the trace holds the start only (it is sampled every 0.1 s)
-    from tracker.bout import PhysicsBout
+    from tracker.bouts.physics_bout import PhysicsBout
     with pytest.raises(ValueError, match="max_wall_s"):
         PhysicsBout.run(None, max_wall_s=0.0)
 
 
 def test_bout_video_renders(setup, tmp_path):
     """The MP4 of a short bout (offscreen MuJoCo: EGL, else OSMesa)."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.bout_media import render_bout_video
-    from tracker.pd import PDController
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.media import render_bout_video
+    from tracker.track.pd import PDController
     bout = PhysicsBout(setup, [MenuAgent(name="a"), MenuAgent(name="b")], PDController(), BoutConfig(seconds=1.0))
     res = bout.run(seed=1)
     try:
@@ -174,15 +168,17 @@ def test_coupled_state_from_physics_matches_the_kinematic_simulator(setup):
     coupled state the agents see equals the kinematic game's for the same actions."""
     from igraph_fight.controller import observe
 
-    from tracker.bout import BoutConfig, BoutSetup, MenuAgent, PhysicsBout
-    from tracker.pd import PDController
+    from tracker.bouts.setup import BoutConfig, BoutSetup
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.track.pd import PDController
     lib = setup.library
     assisted = BoutSetup(lib, *_assisted_parts(setup))
     seen = []
 
     class Rec(MenuAgent):
-        def decide(self, ctx):
-            a = super().decide(ctx)
+        def step(self, ctx, player):
+            a = super().step(ctx, player)
             seen.append((ctx.k, ctx.obs))
             return a
 
@@ -202,7 +198,7 @@ def test_coupled_state_from_physics_matches_the_kinematic_simulator(setup):
 
 def _assisted_parts(setup):
     """(scene, env, lift, tables, game, root_assist) of a root-assisted copy of ``setup``."""
-    from tracker.bout import BoutSetup
+    from tracker.bouts.setup import BoutSetup
     a = BoutSetup.create(setup.library, root_assist=True)
     return a.scene, a.env, a.lift_m, a.tables, a.game, True
 
@@ -210,13 +206,15 @@ def _assisted_parts(setup):
 def _guarding_pd_bout(setup, **rules):
     """A started 6 s bout of two PD-tracked fighters that only guard, 3 m apart (they fall within
     seconds), under BoutConfig(**rules)."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.pd import PDController
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.track.pd import PDController
     lib = setup.library
     guards = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
     bout = PhysicsBout(setup, [MenuAgent(guards, "a"), MenuAgent(guards, "b")], PDController(),
                        BoutConfig(seconds=6.0, **rules))
-    bout.start(seed=0, initial=_facing_start(setup, guards[0], distance=3.0))
+    bout.start(seed=0, initial=facing_start(setup, guards[0], distance=3.0))
     return bout
 
 
@@ -276,8 +274,10 @@ def test_planned_hit_windows_and_how_near_the_fist_came(setup):
     (PhysicsBout.planned_windows: the library window widened by window_slack, the strike's fist)
     while it is open and not after; once it has passed, the planned event records how near the fist
     came (closest_m: 0 if it landed) and the summary lists it."""
-    from tracker.bout import BoutConfig, MenuAgent, PhysicsBout
-    from tracker.policy import load_policy
+    from tracker.bouts.setup import BoutConfig
+    from tracker.bouts.agents import MenuAgent
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.track.policy_net import load_policy
     lib = setup.library
     calm = [g for g in range(lib.n_actions) if lib.labels[g] == "guard"]
     lo, hi = BoutConfig().window_slack
@@ -289,7 +289,7 @@ def test_planned_hit_windows_and_how_near_the_fist_came(setup):
         w = (int(lib.strike_w0[k]) - lo, int(lib.strike_w1[k]) + hi)
         for d in (0.6, 0.7, 0.8, 0.9):
             bout = PhysicsBout(setup, [MenuAgent([a], "puncher"), MenuAgent(calm, "target")], policy, BoutConfig(seconds=3.0))
-            bout.start(seed=0, initial=_facing_start(setup, a, distance=d))
+            bout.start(seed=0, initial=facing_start(setup, a, distance=d))
             offered = []
             while bout.env.t < w[1] + 2:
                 offered.append(bout.planned_windows(0, bout.env.t))

@@ -1,4 +1,4 @@
-"""The physics RL baseline (tracker.physics_rl): the semi-MDP advantage estimate by hand, a short
+"""The physics RL baseline (tracker.bouts.rl_agent): the semi-MDP advantage estimate by hand, a short
 self-play run that writes a checkpoint and resumes from it, the checkpoint's library check, the
 override parser's errors, and an evaluation bout of a planner fighter against the trained policy."""
 from __future__ import annotations
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from tracker.physics_rl import RLConfig, gae, load_rl_agent, load_rl_checkpoint, parse_overrides
+from tracker.bouts.rl_agent import RLConfig, load_rl_agent, load_rl_checkpoint
+from tracker.learn.train_physics_rl import gae, parse_overrides
 
 
 def test_gae_discounts_by_the_decisions_length_and_stops_at_episode_ends():
@@ -38,7 +39,7 @@ def test_override_parser_names_bad_fields_and_values():
 
 @pytest.mark.realdata
 def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, tmp_path):
-    from tracker.physics_rl import train
+    from tracker.learn.train_physics_rl import train
     cfg = RLConfig(n_workers=1, decisions_per_worker=6, episode_s=2.0, epochs=1, minibatch=8, snapshot_every=1,
                    ckpt_every_min=100.0, seed=3)
     out = tmp_path / "rl.pt"
@@ -65,7 +66,7 @@ def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, t
         load_rl_agent(tmp_path / "nope.pt", lib_wrong)
 
     # planner + tracker against it: one short bout per style, score = IG hits - RL hits
-    from tracker.physics_rl import evaluate_vs_rl
+    from tracker.bouts.rl_eval import evaluate_vs_rl
     res = evaluate_vs_rl(str(tiny_graph_file), str(out), ["infighter"], n_bouts=1, seconds=2.0, depth=2,
                          tracker="pd", log=lambda s: None)
     row = res["styles"]["infighter"]["bouts"][0]
@@ -92,10 +93,10 @@ def test_short_self_play_run_writes_a_checkpoint_that_resumes(tiny_graph_file, t
 
 @pytest.mark.realdata
 def test_shipped_checkpoint_loads_for_the_boxing_library(boxing_library):
-    from tracker.physics_rl import DEFAULT_RL_CKPT
+    from tracker.bouts.rl_agent import DEFAULT_RL_CKPT
     agent = load_rl_agent(None, boxing_library)
     ck = load_rl_checkpoint(DEFAULT_RL_CKPT)
     assert agent.n_actions == boxing_library.n_actions == ck["n_actions"]
-    # the documented budget (eleventh session): 40 minutes on two workers, 1.17 CPU-hours, 98,421 decisions
+    # the documented budget (docs/tracker.md): 40 minutes on two workers, 1.17 CPU-hours, 98,421 decisions
     assert ck["final"] and ck["budget"]["worker_cpu_s"] >= 3600 and ck["budget"]["decisions"] >= 90_000
     assert ck["config"]["w_energy"] == 1e-5

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import planner
-from planner import (ATTACK_KINDS, SearchGraph, Style, StyleError, compute_policy, cooperative_rewards,
-                     edge_rewards, load_style, minmax, roulette_probabilities, roulette_select, save_style,
-                     select_edge, synthetic_graph, value_iteration, value_iteration_pair)
+from planner import (
+    ATTACK_KINDS, SearchGraph, Style, StyleError, compute_policy, cooperative_rewards, edge_rewards, load_style,
+    minmax, roulette_probabilities, roulette_select, save_style, select_edge, synthetic_graph, value_iteration,
+    value_iteration_pair)
 
 #: Tolerance for float32 values (rewards of order 1, depth <= 5).
 TOL = 2e-5

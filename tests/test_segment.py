@@ -10,7 +10,7 @@ from motion_graph.features import clip_features
 from motion_graph.library import build_library, segment_files
 from motion_graph.segment import segment_clip
 from motion_graph.strikes import detect_strikes
-from motion_graph.synthetic import synthetic_boxer
+from motion_graph.synthetic_boxer import synthetic_boxer
 
 
 def test_synthetic_punch_is_found_and_not_cut():
@@ -66,7 +66,7 @@ def test_cmu_boxing_contacts_match_design(boxing_files):
     from motion_graph.io import load_motion
     m = load_motion(boxing_files[0])
     s = contact_summary(foot_contacts(clip_features(m)), m.fps)
-    # DESIGN.md 2: double-support intervals about 2.5 per second, a third of frames in flight.
+    # double-support intervals about 2.5 per second, a third of frames in flight (docs/architecture.md, actions from mocap).
     assert 1.8 < s["double_support_per_s"] < 3.5
     assert 0.2 < s["flight_share"] < 0.5
 

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from motion_graph.io import load_motion
-from tracker.controller import Controller, make_controller
-from tracker.env import EnvConfig, TrackingEnv
-from tracker.fall import detect_fall, fall_geom_mask
-from tracker.model import ModelOptions, build_fighter_scene
-from tracker.pd import PDController
-from tracker.reference import build_reference
-from tracker.spec import fighter_spec
+from tracker.track.controllers import Controller, make_controller
+from tracker.track.env import EnvConfig, TrackingEnv
+from tracker.body.fall import detect_fall, fall_geom_mask
+from tracker.body.humanoid import ModelOptions, build_fighter_scene
+from tracker.track.pd import PDController
+from tracker.track.reference import build_reference
+from tracker.body.spec import fighter_spec
 
 pytestmark = pytest.mark.realdata
 
@@ -159,7 +159,7 @@ def test_reset_rejects_wrong_rate(mocap_root):
 def test_arm_velocity_targets_offset_only_the_arm_actuators(mocap_root, tmp_path):
     """arm_velocity_targets: the arm actuators' targets carry (kd / kp) x the reference velocity,
     every other actuator's target is the plain PD's; velocity_targets offsets all of them."""
-    from tracker.env import ARM_CLASSES
+    from tracker.track.env import ARM_CLASSES
     scene, ref = _boxing(mocap_root)
     f = scene.fighters[0]
     arm = np.array([c in ARM_CLASSES for c in f.act_class])
@@ -181,6 +181,6 @@ def test_arm_velocity_targets_offset_only_the_arm_actuators(mocap_root, tmp_path
     p.write_text('{"arm_velocity_targets": true}')
     assert PDController.from_ckpt(str(p)).arm_velocity_targets is True
     # the "balance" controller keeps a gains file's PD knobs and adds the layer's default gains
-    from tracker.vforce import BalanceGains
+    from tracker.track.vforce import BalanceGains
     b = make_controller("balance", str(p))
     assert b.arm_velocity_targets is True and b.balance == BalanceGains().as_tuple()

@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from tracker.evaluate import draw_walks, evaluate_walks, make_setup
-from tracker.pd import PDController
-from tracker.walks import ClipWindows, LibraryWalks
+from tracker.track.evaluation import draw_walks, evaluate_walks, make_setup
+from tracker.track.pd import PDController
+from tracker.track.walks import ClipWindows, LibraryWalks
 
 pytestmark = pytest.mark.realdata
 

@@ -1,5 +1,5 @@
-"""The balance layer's steering (tracker/vforce.py ``bias``) and the learned balance head
-(tracker/layer_head.py): a steered target moves the body's centre of mass that way in the facing
+"""The balance layer's steering (tracker/track/vforce.py ``bias``) and the learned balance head
+(research/layer_head.py): a steered target moves the body's centre of mass that way in the facing
 frame, set_balance clears the steering, a checkpoint with a head steers the layer each step (and
 needs the layer), and the search's labels come in sigma units within the head's range."""
 from __future__ import annotations
@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from tracker.env import _heading
-from tracker.evaluate import draw_walks, make_setup, walk_reference
-from tracker.layer_head import Head, HeadConfig, collect, fit, save_head
-from tracker.pd import PDController
-from tracker.policy import DEFAULT_CKPT, RunningNorm, load_checkpoint, load_policy
-from tracker.walks import LibraryWalks
+from tracker.body.frames import ground_yaw
+from tracker.track.evaluation import draw_walks, make_setup, walk_reference
+from research.layer_head import Head, HeadConfig, collect, fit, load_head_policy, save_head
+from tracker.track.pd import PDController
+from tracker.track.policy_net import DEFAULT_CKPT, RunningNorm, load_checkpoint, load_policy
+from tracker.track.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata
 
@@ -32,7 +32,7 @@ def _com_offset(env) -> np.ndarray:
     f = env.scene.fighters[0]
     feet = [int(f.body_ids[list(f.body_joints).index(f.spec.parts[p])]) for p in ("l_ankle", "r_ankle")]
     off = d.subtree_com[c.pelvis] - d.xpos[feet].mean(0)
-    yaw = _heading(d.xmat[c.pelvis].reshape(3, 3), c.lateral)
+    yaw = ground_yaw(d.xmat[c.pelvis].reshape(3, 3), c.lateral)
     cy, sy = np.cos(yaw), np.sin(yaw)
     return np.array([[cy, sy], [-sy, cy]]) @ off[:2]
 
@@ -78,7 +78,9 @@ def test_a_checkpoint_with_a_head_steers_each_step(setup, tmp_path):
         head.mu[-1].bias.fill_(0.5)                       # half a sigma on every output
     out = tmp_path / "h.pt"
     save_head(str(out), HeadConfig(hidden=(8,)), head.state_dict(), [])
-    ctrl = load_policy(out)
+    ctrl = load_head_policy(out)
+    with pytest.raises(ValueError, match="balance head"):   # the product's loader does not run heads
+        load_policy(out)
     assert ctrl.head is not None and "balance head" in ctrl.describe()
     env = setup.env
     _, ref = walk_reference(setup, draw_walks(setup.source, 1, 3, 2)[0])
@@ -90,7 +92,7 @@ def test_a_checkpoint_with_a_head_steers_each_step(setup, tmp_path):
     ck_nolayer["config"] = {**ck_nolayer["config"], "vf_gains": ()}
     torch.save(ck_nolayer, tmp_path / "bad.pt")
     with pytest.raises(ValueError, match="needs the balance layer"):
-        load_policy(tmp_path / "bad.pt")
+        load_head_policy(tmp_path / "bad.pt")
 
 
 def test_search_labels_are_in_sigma_units_and_fit(boxing_library_file):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from motion_graph.io import load_motion
-from tracker.contacts import fighter_contacts
-from tracker.model import EFFECTOR_LABELS, TARGET_LABELS, ModelOptions, build_fighter_scene
-from tracker.reference import build_reference, placement_transform
-from tracker.spec import fighter_spec
+from tracker.body.fighter_contacts import fighter_contacts
+from tracker.body.humanoid import EFFECTOR_LABELS, TARGET_LABELS, ModelOptions, build_fighter_scene
+from tracker.track.reference import build_reference, placement_transform
+from tracker.body.spec import fighter_spec
 
 #: One file per distinct skeleton in ../shared/mocap (CMU BVH 13 and 135, CMU ASF 13 and 135, Bandai).
 SKELETON_FILES = ("cmu/boxing/13_18.bvh", "cmu/martial_arts/135_06.bvh", "cmu/asf_amc/13_18.amc",

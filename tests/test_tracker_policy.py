@@ -4,16 +4,16 @@ a short run of the search route improves the tracking reward from a deliberately
 run does not depend on the caller's random state; the shipped checkpoint outlasts PD-only on the
 protocol's first walks.
 
-Not tested because not achieved (issue 7 stays open): the acceptance's 5x PD's time to fall (the
-shipped policy reaches about 1.1-1.2x; tracker/TRAINING.md)."""
+Not tested because not achieved: 5x PD's time to fall (the shipped policy reaches about
+1.1-1.2x; docs/tracker.md)."""
 from __future__ import annotations
 
 
 import numpy as np
 import pytest
 
-from tracker.evaluate import make_setup
-from tracker.walks import LibraryWalks
+from tracker.track.evaluation import make_setup
+from tracker.track.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata
 
@@ -29,7 +29,7 @@ def source(boxing_library_file):
 @pytest.fixture(scope="module")
 def tiny_checkpoint(boxing_library_file, tmp_path_factory):
     """One PPO iteration on real walks (fixed seed): a real, loadable checkpoint of the trainer."""
-    from tracker.train import TrainConfig, train
+    from tracker.learn.train_tracker import TrainConfig, train
     cfg = TrainConfig(seed=0, n_workers=1, envs_per_worker=4, horizon=32, walks_per_worker=2, walk_actions=3,
                       refresh_walks=0, minibatch=128, hidden=(64, 64), critic_hidden=(64, 64),
                       init_noise=0.0, eval_every_min=0)
@@ -39,11 +39,11 @@ def tiny_checkpoint(boxing_library_file, tmp_path_factory):
 
 
 def test_policy_runs_per_fighter_in_a_two_fighter_scene(source, tiny_checkpoint):
-    from tracker.env import TrackingEnv
-    from tracker.evaluate import draw_walks
-    from tracker.model import build_fighter_scene
-    from tracker.policy import load_policy
-    from tracker.reference import build_reference, placement_transform
+    from tracker.track.env import TrackingEnv
+    from tracker.track.evaluation import draw_walks
+    from tracker.body.humanoid import build_fighter_scene
+    from tracker.track.policy_net import load_policy
+    from tracker.track.reference import build_reference, placement_transform
     setup = make_setup(source)
     scene = build_fighter_scene(setup.spec, 2)
     env = TrackingEnv(scene)
@@ -54,7 +54,7 @@ def test_policy_runs_per_fighter_in_a_two_fighter_scene(source, tiny_checkpoint)
     assert ctrl.name == "learned"
     obs = env.reset(refs, 0)
     ctrl.reset(env)
-    from tracker.policy import policy_observation
+    from tracker.track.policy_net import policy_observation
     x = policy_observation(env, obs)
     assert x.shape == (2, ctrl.obs_dim)
     a = ctrl.act(env, obs)
@@ -73,8 +73,8 @@ def test_training_checkpoint_resumes_and_accumulates_budget(boxing_library_file,
     resume): the resumed run starts from the stored weights and adds its samples, iterations and
     CPU time to the budget; the history and the learning-curve plot grow with it."""
     import shutil
-    from tracker.policy import load_checkpoint
-    from tracker.train import train
+    from tracker.track.policy_net import load_checkpoint
+    from tracker.learn.train_tracker import train
     cfg, first = tiny_checkpoint
     out = tmp_path / "tiny.pt"
     shutil.copy(first, out)
@@ -93,8 +93,8 @@ def test_training_checkpoint_resumes_and_accumulates_budget(boxing_library_file,
 def _offset_start(cfg, library: str, path, offset: float) -> None:
     """A fresh checkpoint of ``cfg`` whose policy adds ``offset`` (rad) to every PD target: a
     deliberately wrong start, so that a short run has a clear improvement to find."""
-    from tracker.policy import offset_checkpoint
-    from tracker.train import train
+    from tracker.track.policy_net import offset_checkpoint
+    from tracker.learn.train_tracker import train
     train(cfg, library, 10.0, str(path), max_iterations=0, progress=False, log=lambda *a: None)
     offset_checkpoint(path, path, offset)
 
@@ -102,9 +102,9 @@ def _offset_start(cfg, library: str, path, offset: float) -> None:
 def test_short_search_run_improves_the_tracking_reward(boxing_library_file, tmp_path):
     """Fixed seed, the real training loop (worker process, policy-guided search on real walks,
     distillation), started from a policy that offsets every PD target by 0.3 rad: 8 iterations
-    raise the deterministic policy's tracking reward (tracker.train.rollout_reward, on the first
+    raise the deterministic policy's tracking reward (tracker.learn.train_tracker.rollout_reward, on the first
     run's walks) clearly above the start's (measured: 0.118 -> 0.140)."""
-    from tracker.train import TrainConfig, rollout_reward, train
+    from tracker.learn.train_tracker import TrainConfig, rollout_reward, train
     cfg = TrainConfig(seed=1, algo="search", n_workers=1, envs_per_worker=1, walks_per_worker=2, walk_actions=3,
                       refresh_walks=0, hidden=(64, 64), critic_hidden=(32, 32), init_noise=0.0, eval_every_min=0,
                       candidates=8, segment=3, lookahead=9, search_segments=12, distill_steps=60)
@@ -117,8 +117,8 @@ def test_short_search_run_improves_the_tracking_reward(boxing_library_file, tmp_
     r1 = rollout_reward(str(ck), boxing_library_file, cfg, starts=3, horizon=30)
     assert r1 > 1.15 * r0, (r0, r1)
     # the labels are kept beside the checkpoint, so a resumed run distils on them too
-    from tracker.imitation import LabelBuffer, labels_path
-    from tracker.policy import load_policy
+    from tracker.learn.search_labels import LabelBuffer, labels_path
+    from tracker.track.policy_net import load_policy
     pol = load_policy(ck)
     obs_dim, act_dim = pol.obs_dim, pol.act_dim
     buf = LabelBuffer(10_000)
@@ -128,7 +128,7 @@ def test_short_search_run_improves_the_tracking_reward(boxing_library_file, tmp_
 def test_training_run_does_not_depend_on_the_callers_random_state(boxing_library_file, tmp_path):
     """Two runs with the same seed give the same history whatever the calling process did with
     torch's global generator before (the forked workers' exploration noise is seeded per worker)."""
-    from tracker.train import TrainConfig, train
+    from tracker.learn.train_tracker import TrainConfig, train
     cfg = TrainConfig(seed=2, n_workers=1, envs_per_worker=2, horizon=16, walks_per_worker=1, walk_actions=2,
                       refresh_walks=0, minibatch=32, hidden=(16, 16), critic_hidden=(16, 16), init_noise=0.0,
                       eval_every_min=0)
@@ -144,10 +144,10 @@ def test_training_run_does_not_depend_on_the_callers_random_state(boxing_library
 def test_shipped_checkpoint_outlasts_pd_on_protocol_walks(source):
     """The shipped policy (tracker/checkpoints/boxing_cmu13.pt) loads by default, runs the first 12
     walks of the evaluation protocol (seed 0, 20 actions) and keeps the boxer up longer than PD-only
-    on them, on average (measured: see tracker/checkpoints/README.md; far from issue 7's 5x)."""
-    from tracker.evaluate import paired_comparison
-    from tracker.pd import PDController
-    from tracker.policy import load_default_policy
+    on them, on average (measured: see tracker/checkpoints/README.md)."""
+    from tracker.track.evaluation import paired_comparison
+    from tracker.track.pd import PDController
+    from tracker.track.policy_net import load_default_policy
     r = paired_comparison(make_setup(source), load_default_policy(), PDController(), 12, 20, 0)
     assert np.isfinite(r["policy_mpjpe_cm"])
     assert r["policy_ttf_s"] > r["baseline_ttf_s"], r
@@ -159,9 +159,9 @@ def test_search_following_the_policy_labels_the_policys_own_states(boxing_librar
     alone from the same start; with the default (follow the best candidate) they differ."""
     import mujoco
 
-    from tracker.imitation import search_labels
-    from tracker.policy import Actor, NumpyMLP, RunningNorm
-    from tracker.train import TrainConfig, Worker
+    from tracker.learn.search_labels import search_labels
+    from tracker.track.policy_net import Actor, NumpyMLP, RunningNorm
+    from tracker.learn.train_tracker import TrainConfig, Worker
     finals = {}
     for follow in (1.0, 0.0):
         cfg = TrainConfig(seed=2, algo="search", envs_per_worker=1, walks_per_worker=1, walk_actions=3, init_noise=0.0,

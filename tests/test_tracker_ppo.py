@@ -20,7 +20,7 @@ def _params(module) -> list[np.ndarray]:
 
 
 def test_critic_warmup_keeps_the_actor_then_releases_it():
-    from tracker.train import Learner, TrainConfig
+    from tracker.learn.train_tracker import Learner, TrainConfig
     cfg = TrainConfig(critic_warmup=2, hidden=(16, 16), critic_hidden=(16, 16), minibatch=32, epochs=2,
                       lr_actor=1e-2, target_kl=1e3)
     rng = np.random.default_rng(0)

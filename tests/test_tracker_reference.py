@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from motion_graph.io import load_motion
-from tracker.model import ModelOptions, build_fighter_scene
-from tracker.reference import build_reference, kinematic_error, placement_transform
-from tracker.spec import fighter_spec
+from tracker.body.humanoid import ModelOptions, build_fighter_scene
+from tracker.track.reference import build_reference, kinematic_error, placement_transform
+from tracker.body.spec import fighter_spec
 
 pytestmark = pytest.mark.realdata
 
@@ -38,7 +38,7 @@ def test_clip_reference_matches_kinematics_within_1cm(mocap_root, rel, joint_typ
 
 def test_library_walk_reference_matches_within_1cm_and_reports_penetration(boxing_library):
     lib = boxing_library
-    from tracker.walks import LibraryWalks
+    from tracker.track.walks import LibraryWalks
     src = LibraryWalks(lib)
     spec = fighter_spec(src.skeleton, src.calibration_motions())
     scene = build_fighter_scene(spec, 2)
@@ -49,7 +49,7 @@ def test_library_walk_reference_matches_within_1cm_and_reports_penetration(boxin
     ref = build_reference(motion, scene, 1, placement=placement_transform(1.0, -0.5, 2.0), lift="none")
     pos = motion.positions()
     R, t = placement_transform(1.0, -0.5, 2.0)
-    from tracker.model import C_MOCAP_TO_MJ
+    from tracker.body.humanoid import C_MOCAP_TO_MJ
     f = scene.fighters[1]
     want = (pos[:, f.site_joints[f.tracked]] @ R.T + t) @ C_MOCAP_TO_MJ.T
     assert np.abs(ref.sites[:, f.tracked] - want).max() < 0.01

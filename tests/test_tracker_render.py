@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from motion_graph.io import load_motion
-from tracker.model import build_fighter_scene
-from tracker.pd import PDController
-from tracker.reference import build_reference
-from tracker.render import image_stats, record_rollout, render_frames, save_contact_sheet
-from tracker.spec import fighter_spec
+from tracker.body.humanoid import build_fighter_scene
+from tracker.track.pd import PDController
+from tracker.track.reference import build_reference
+from tracker.track.render import image_stats, record_rollout, render_frames, save_contact_sheet
+from tracker.body.spec import fighter_spec
 
 pytestmark = pytest.mark.realdata
 

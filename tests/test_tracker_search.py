@@ -1,4 +1,4 @@
-"""The run-time search controller (tracker/search_controller.py) and parallel walk evaluation:
+"""The run-time search controller (research/search_controller.py) and parallel walk evaluation:
 a one-candidate search is the plain policy exactly (the search restores the state it starts
 from), a search run is deterministic, and ``evaluate_walks(workers=2)`` gives a serial run's
 metrics."""
@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import walk_qpos
 
-from tracker.controller import make_controller
-from tracker.evaluate import draw_walks, evaluate_walks, make_setup, walk_reference
-from tracker.pd import PDController
-from tracker.policy import load_policy
-from tracker.search_controller import SearchController, SearchSettings
-from tracker.walks import LibraryWalks
+from tracker.track.evaluation import draw_walks, evaluate_walks, make_setup
+from tracker.track.pd import PDController
+from tracker.track.policy_net import load_policy
+from research.search_controller import SearchController, SearchSettings, make_search_controller
+from tracker.track.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata
 
@@ -22,38 +22,24 @@ def setup(boxing_library):
     return make_setup(LibraryWalks(boxing_library))
 
 
-def _qpos(setup, ctrl, walk, steps=24):
-    env = setup.env
-    _, ref = walk_reference(setup, walk)
-    obs = env.reset(ref, 0)
-    ctrl.reset(env)
-    out = []
-    for _ in range(steps):
-        obs, _, done, _ = env.step(ctrl.act(env, obs))
-        out.append(env.data.qpos.copy())
-        if done:
-            break
-    return np.array(out), env.t, env.sim_time
-
-
 def test_one_candidate_is_the_plain_policy_and_search_is_deterministic(setup):
     walk = draw_walks(setup.source, 1, 3, 4)[0]
-    plain = _qpos(setup, load_policy(), walk)
-    one = _qpos(setup, SearchController(load_policy(), SearchSettings(candidates=1, lookahead=6)), walk)
+    plain = walk_qpos(setup, load_policy(), walk)
+    one = walk_qpos(setup, SearchController(load_policy(), SearchSettings(candidates=1, lookahead=6)), walk)
     np.testing.assert_array_equal(plain[0], one[0])
     assert plain[1:] == one[1:]                      # the env's step counter and clock restored too
     s = SearchSettings(candidates=3, lookahead=4, seed=2)
-    a = _qpos(setup, SearchController(load_policy(), s), walk)
-    b = _qpos(setup, SearchController(load_policy(), s), walk)
+    a = walk_qpos(setup, SearchController(load_policy(), s), walk)
+    b = walk_qpos(setup, SearchController(load_policy(), s), walk)
     np.testing.assert_array_equal(a[0], b[0])
     assert not np.array_equal(a[0], plain[0])        # the search did choose offsets
-    lay = _qpos(setup, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, space="layer")), walk)
+    lay = walk_qpos(setup, SearchController(load_policy(), SearchSettings(candidates=3, lookahead=4, space="layer")), walk)
     assert not np.array_equal(lay[0], plain[0])
 
 
 def test_search_controller_by_name_and_errors():
-    assert make_controller("search").name == "search"
-    fast = make_controller("search-fast")
+    assert make_search_controller("search").name == "search"
+    fast = make_search_controller("search-fast")
     assert (fast.s.early_accept, fast.s.incremental, fast.s.first_kept) == (True, True, True)
     with pytest.raises(ValueError, match="'joints' or 'layer'"):
         SearchController(None, SearchSettings(space="hips"))

@@ -1,4 +1,4 @@
-"""The virtual-force balance layer (tracker/vforce.py): only leg joint targets change, never the
+"""The virtual-force balance layer (tracker/track/vforce.py): only leg joint targets change, never the
 root; zero gains change nothing; it keeps the body up longer than PD on fixed walks; it runs for
 two fighters and is turned on by a learned policy's checkpoint config."""
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.evaluate import draw_walks, make_setup, run_walk, walk_reference
-from tracker.pd import PDController
-from tracker.vforce import BalanceGains
-from tracker.walks import LibraryWalks
+from tracker.track.evaluation import draw_walks, make_setup, run_walk, walk_reference
+from tracker.track.pd import PDController
+from tracker.track.vforce import BalanceGains
+from tracker.track.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata
 
@@ -70,13 +70,13 @@ def test_balance_outlasts_pd_on_fixed_walks(setup):
 
 
 def test_two_fighters_and_learned_config(setup, tmp_path):
-    from tracker.env import TrackingEnv
-    from tracker.model import build_fighter_scene
-    from tracker.policy import LearnedController, load_checkpoint, DEFAULT_CKPT
+    from tracker.track.env import TrackingEnv
+    from tracker.body.humanoid import build_fighter_scene
+    from tracker.track.policy_net import LearnedController, load_checkpoint, DEFAULT_CKPT
     scene = build_fighter_scene(setup.spec, 2)
     env = TrackingEnv(scene, setup.config)
     _, ref = walk_reference(setup, draw_walks(setup.source, 1, 4, 5)[0])
-    from tracker.reference import build_reference, placement_transform
+    from tracker.track.reference import build_reference, placement_transform
     other = setup.source.sequence_motion(draw_walks(setup.source, 1, 4, 6)[0])
     refs = [ref, build_reference(other, scene, 1, fps=30.0, placement=placement_transform(dx=3.0))]
     env.reset(refs, 0)
@@ -101,10 +101,10 @@ def test_two_fighters_and_learned_config(setup, tmp_path):
 def test_stance_feet_match_a_scan_of_every_contact(setup):
     """The layer's vectorised stance test agrees with reading each contact, for two fighters, on
     states where one, both or no feet touch (a walk's first second, then a topple)."""
-    from tracker.env import TrackingEnv
-    from tracker.model import build_fighter_scene
-    from tracker.reference import build_reference, placement_transform
-    from tracker.vforce import _xy_mean
+    from tracker.track.env import TrackingEnv
+    from tracker.body.humanoid import build_fighter_scene
+    from tracker.track.reference import build_reference, placement_transform
+    from tracker.track.vforce import xy_mean
     scene = build_fighter_scene(setup.spec, 2)
     env = TrackingEnv(scene, setup.config)
     walks = draw_walks(setup.source, 2, 4, 11)
@@ -133,7 +133,7 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
         # the feet's centroid kernel: bit for bit the numpy mean the layer used before it
         for fi in layer.fighters:
             for leg in fi.legs.values():
-                assert np.array_equal(_xy_mean(d.geom_xpos, leg["geoms"]),
+                assert np.array_equal(xy_mean(d.geom_xpos, leg["geoms"]),
                                       d.geom_xpos[leg["geoms"], :2].sum(0) / len(leg["geoms"]))
     assert {1, 2} <= seen          # single and double support both occurred
 
@@ -141,7 +141,7 @@ def test_stance_feet_match_a_scan_of_every_contact(setup):
 def test_layer_follows_gains_set_after_it_was_built(setup):
     """The layer lives as long as the env; a controller that sets other PD gains at reset must get
     the same physics as in a fresh env (its torques go through the actuators' current kp)."""
-    from tracker.vforce import BalanceGains
+    from tracker.track.vforce import BalanceGains
     stiff = PDController(kp_scale=1.5, balance=BalanceGains().as_tuple())
     walk = draw_walks(setup.source, 1, 4, 3)[0]
     fresh = make_setup(setup.source)                              # its own env, no layer yet

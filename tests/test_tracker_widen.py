@@ -1,4 +1,4 @@
-"""Widening a trained policy's observation to more reference horizons (tracker.widen): the widened
+"""Widening a trained policy's observation to more reference horizons (tracker.learn.widen): the widened
 policy computes exactly what the trained one did, the stored labels follow, and a resumed search
 run trains the widened policy."""
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.evaluate import make_setup
-from tracker.walks import LibraryWalks
+from tracker.track.evaluation import make_setup
+from tracker.track.walks import LibraryWalks
 
 pytestmark = pytest.mark.realdata
 
@@ -24,10 +24,10 @@ def test_widened_shipped_policy_acts_exactly_as_before(source):
     """The shipped policy widened from horizons (1, 2, 4) to (1, 2, 4, 8, 12, 16) gives the same PD
     targets along a tracked walk (its new inputs are read, with zero weights), although its
     observation is 3 blocks longer and the environment observes only (1, 2, 4)."""
-    from tracker.evaluate import draw_walks
-    from tracker.policy import DEFAULT_CKPT, LearnedController, load_checkpoint
-    from tracker.reference import build_reference
-    from tracker.widen import widen_checkpoint
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.policy_net import DEFAULT_CKPT, LearnedController, load_checkpoint
+    from tracker.track.reference import build_reference
+    from tracker.learn.widen import widen_checkpoint
     ck = load_checkpoint(DEFAULT_CKPT)
     old = LearnedController(ck)
     wide = LearnedController(widen_checkpoint(ck, (1, 2, 4, 8, 12, 16))[0])
@@ -51,7 +51,7 @@ def test_widened_shipped_policy_acts_exactly_as_before(source):
 
 
 def test_widening_keeps_every_trained_horizon():
-    from tracker.widen import column_map
+    from tracker.learn.widen import column_map
     with pytest.raises(ValueError, match="drops the trained horizons"):
         column_map(100, 10, (1, 2, 4), (1, 8), True)
     src, new = column_map(10 + 2 * 18 + 32, 10, (1, 4), (1, 2, 4), True)
@@ -63,9 +63,9 @@ def test_widening_keeps_every_trained_horizon():
 def test_resumed_search_run_widens_policy_and_labels(boxing_library_file, tmp_path):
     """A search run resumed with more horizons keeps its labels (widened) and trains the widened
     policy, whose new first-layer weights move away from zero."""
-    from tracker.imitation import LabelBuffer, labels_path
-    from tracker.policy import load_checkpoint
-    from tracker.train import TrainConfig, train
+    from tracker.learn.search_labels import LabelBuffer, labels_path
+    from tracker.track.policy_net import load_checkpoint
+    from tracker.learn.train_tracker import TrainConfig, train
     cfg = TrainConfig(seed=1, algo="search", n_workers=1, envs_per_worker=1, walks_per_worker=1, walk_actions=2,
                       refresh_walks=0, hidden=(32, 32), critic_hidden=(16, 16), init_noise=0.0, eval_every_min=0,
                       candidates=3, segment=3, lookahead=3, search_segments=4, distill_steps=5)

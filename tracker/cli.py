@@ -1,11 +1,15 @@
-"""`igraph-fight tracker ...`: evaluate tracking controllers on action-graph walks, render them,
-export the generated MuJoCo model.
+"""The tracker's plugin of the igraph-fight command (entry points in pyproject.toml):
+``register(subparsers)`` adds the `igraph-fight tracker ...` group, ``physics_fight(args)`` runs
+`igraph-fight fight --physics ...`.
 
-    igraph-fight tracker eval [--controller pd|balance|learned|search|search-fast] [--ckpt CKPT] --walks 100 --actions 20 --seed 0
+    igraph-fight tracker eval [--controller pd|balance|learned] [--ckpt CKPT] --walks 100 --actions 20 --seed 0
                               [--workers N] [--json]
     igraph-fight tracker render --out walk.png|walk.mp4 [--actions 6] [--seed 0] [--seconds 6]
     igraph-fight tracker model FILE.bvh --out fighter.xml [--fighters 2]
     igraph-fight tracker train --library LIB --minutes M --out CKPT [--resume CKPT] [--device auto]
+    igraph-fight tracker bouts fight|series ...       (physics bouts: tracker.bouts.cli)
+    igraph-fight tracker rl train|eval ...            (the physics RL baseline)
+    igraph-fight tracker hit-model collect|kinds|train ...
 
 ``--controller learned`` without ``--ckpt`` loads the shipped policy (tracker/checkpoints/boxing_cmu13.pt).
 
@@ -30,9 +34,8 @@ def register(subparsers) -> None:
         q.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
         q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
-        q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, tracker/vforce.py), learned, or "
-                            "search (the learned policy steered by a run-time search: offline, ~0.15x real time), or "
-                            "search-fast (its cheaper variant: ~1.8x real time, tracker/TRAINING.md fifteenth and twenty-fourth sessions)")
+        q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, "
+                       "tracker/track/vforce.py) or learned (the learned policy, tracker/track/policy_net.py)")
         q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
                                       "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
         q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")
@@ -74,9 +77,14 @@ def register(subparsers) -> None:
     m.add_argument("--physics-hz", type=float, default=240.0)
     m.set_defaults(func=cmd_model)
 
+    from tracker.bouts.cli import add_bout_commands, add_hit_model_commands, add_rl_commands
+    add_bout_commands(sub)
+    add_rl_commands(sub)
+    add_hit_model_commands(sub)
+
 
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
-    """Arguments of `tracker train` (here, not in tracker.train, so the CLI starts without torch)."""
+    """Arguments of `tracker train` (here, not in tracker.learn.train_tracker, so the CLI starts without torch)."""
     p.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
     p.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
     p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it, and for "
@@ -94,21 +102,30 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _setup(args):
-    from .evaluate import make_setup
-    from .model import ModelOptions
-    from .walks import walk_source
+    from tracker.track.evaluation import make_setup
+    from tracker.body.humanoid import ModelOptions
+    from tracker.track.walks import walk_source
     src = walk_source(args.library, args.mocap, args.clips)
     return make_setup(src, ModelOptions(physics_hz=args.physics_hz))
 
 
+def _controller(args):
+    """The controller of `tracker eval|render`: ``args.controller`` by name
+    (tracker.track.controllers.make_controller with ``args.ckpt``), or the controller object a
+    caller of cmd_eval / cmd_render put there."""
+    if not isinstance(args.controller, str):
+        return args.controller
+    from tracker.track.controllers import make_controller
+    return make_controller(args.controller, args.ckpt)
+
+
 def cmd_eval(args) -> int:
-    from .controller import make_controller
-    from .evaluate import evaluate_walks, format_report
+    from tracker.track.evaluation import evaluate_walks, format_report
     if args.walks < 1 or args.actions < 1:
         print("igraph-fight tracker eval: --walks and --actions must be >= 1", file=sys.stderr)
         return 2
     try:
-        controller = make_controller(args.controller, args.ckpt)
+        controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
         print(f"igraph-fight tracker eval: {e}", file=sys.stderr)
         return 2
@@ -127,17 +144,16 @@ def cmd_render(args) -> int:
 
     import numpy as np
 
-    from .controller import make_controller
-    from .evaluate import draw_walks
-    from .reference import build_reference
-    from .render import image_stats, record_rollout, render_frames, save_contact_sheet, save_video
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.reference import build_reference
+    from tracker.track.render import image_stats, record_rollout, render_frames, save_contact_sheet, save_video
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".mp4"):
         print("igraph-fight tracker render: --out must end in .png or .mp4", file=sys.stderr)
         return 2
     try:
-        controller = make_controller(args.controller, args.ckpt)
+        controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
         print(f"igraph-fight tracker render: {e}", file=sys.stderr)
         return 2
@@ -173,7 +189,7 @@ def cmd_render(args) -> int:
 
 
 def cmd_train(args) -> int:
-    from .train import main_args
+    from tracker.learn.train_tracker import main_args
     return main_args(args)
 
 
@@ -182,8 +198,8 @@ def cmd_model(args) -> int:
 
     from motion_graph.io import load_motion
 
-    from .model import ModelOptions, build_fighter_scene
-    from .spec import fighter_spec
+    from tracker.body.humanoid import ModelOptions, build_fighter_scene
+    from tracker.body.spec import fighter_spec
     m = load_motion(args.file)
     spec = fighter_spec(m.skeleton, [m])
     scene = build_fighter_scene(spec, args.fighters, ModelOptions(physics_hz=args.physics_hz))
@@ -193,3 +209,8 @@ def cmd_model(args) -> int:
           f"{f.n_act} actuators each, {spec.mass_kg:g} kg, height {spec.height_m:.2f} m")
     return 0
 
+
+def physics_fight(args) -> int:
+    """`igraph-fight fight --physics ...` (the igraph_fight.physics entry point)."""
+    from tracker.bouts.cli import cmd_physics_fight
+    return cmd_physics_fight(args)

@@ -14,6 +14,7 @@ import numpy as np
 
 from motion_graph.classify import ATTACK_KINDS, KINDS
 from planner import Style, load_style
+from motion_graph.rotations import wrap_angle
 from planner.rewards import DISTANCE_FEATURES, kind_preferences
 
 DEFENCE_KINDS = ("duck", "dodge")
@@ -22,14 +23,6 @@ MOVE_KINDS = ("step_forward", "step_back", "step_left", "step_right", "turn_left
 
 def as_style(style: Style | str | Path) -> Style:
     return style if isinstance(style, Style) else load_style(style)
-
-
-def style_params(style: Style) -> np.ndarray:
-    """The style as the float vector the numba kernels take:
-    [d_p, w_theta, w_d, w_dmg_given, w_dmg_received, w_def, per_second, distance is 'mean']."""
-    return np.array([style.d_p, style.w_theta, style.w_d, style.w_dmg_given, style.w_dmg_received, style.w_def,
-                     float(style.per_second), float(DISTANCE_FEATURES[style.distance] == "feat_r_mean")],
-                    dtype=np.float64)
 
 
 def attack_mask(tables) -> np.ndarray:
@@ -69,8 +62,8 @@ class EventReward:
         dz = float(world.z[o] - world.z[decider])
         r_end = math.hypot(dx, dz)
         b = math.atan2(dx, dz)
-        th_d = _wrap(b - float(world.heading[decider]))
-        th_o = _wrap(b + math.pi - float(world.heading[o]))
+        th_d = wrap_angle(b - float(world.heading[decider]))
+        th_o = wrap_angle(b + math.pi - float(world.heading[o]))
         if ev is None:
             dur, r_mean, dmg, dfd = 0.0, r_end, (0.0, 0.0), (0.0, 0.0)
         else:
@@ -95,10 +88,6 @@ class EventReward:
         return float(self.pref[k]) if 0 <= k < len(self.pref) else 1.0
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 def predicted_relative(lib, actions: np.ndarray, r: float, theta_self: float) -> tuple[np.ndarray, np.ndarray]:
     """Distance and own angle to a *standing* opponent after each action (from the library's
     root displacement of the action; the opponent assumed still). Used by the scripted proxy."""
@@ -107,5 +96,5 @@ def predicted_relative(lib, actions: np.ndarray, r: float, theta_self: float) ->
     vx = ox - np.asarray(lib.dx)[a]
     vz = oz - np.asarray(lib.dz)[a]
     r2 = np.hypot(vx, vz)
-    th2 = (np.arctan2(vx, vz) - np.asarray(lib.dheading)[a] + np.pi) % (2 * np.pi) - np.pi
+    th2 = wrap_angle(np.arctan2(vx, vz) - np.asarray(lib.dheading)[a])
     return r2, th2

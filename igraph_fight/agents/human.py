@@ -35,7 +35,7 @@ import numpy as np
 
 from motion_graph.classify import KINDS
 
-from .common import DEFENCE_KINDS, attack_mask, defence_mask, predicted_relative
+from igraph_fight.agents.common import DEFENCE_KINDS, attack_mask, defence_mask, predicted_relative
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ class HumanProxyAgent:
                 w1[a] = int(np.max(lib.strike_w1[so[a]:so[a + 1]]))
         self._reach = reach
         self._strike_end = w1  # frame after which the action's strikes are over
-        from .static import dummy_tables
+        from igraph_fight.agents.static import dummy_tables
         self._dt, self._dummy = dummy_tables(tables)
         self._T = self._dt.kernel_tuple()
 
@@ -164,7 +164,7 @@ class HumanProxyAgent:
     def _best_punch(self, attacks: np.ndarray, r: float, ts: float) -> int:
         """The attack with the most hits (then most near misses) in one simulated event against a
         guard dummy at the perceived distance and angle, facing the proxy; ties at random."""
-        from .. import sim
+        from igraph_fight import sim
         si = np.array([[int(attacks[0]), self._dummy, 0, 0]], dtype=np.int64)
         sf = np.array([[r, ts, 0.0]])
         _, _, ft, _ = sim.expand_samples(self._T, si, sf, np.zeros(len(attacks), dtype=np.int64), attacks)
@@ -180,7 +180,7 @@ class HumanProxyAgent:
 
 def _root_back(T, a: int, f: int, f_back: int, x: float, z: float, h: float) -> tuple[float, float, float]:
     """Root pose (x, z, heading) at frame ``f_back`` of action ``a`` for a fighter whose root is
-    at (x, z, h) at frame ``f`` (the same start transform; sim._start_from_root / sim._root)."""
+    at (x, z, h) at frame ``f`` (the same start transform; sim.start_from_root / sim.root_pose)."""
     p = T.path
     g = int(T.frame_offsets[a]) + f
     sh = h - p[g, 2]

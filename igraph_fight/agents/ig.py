@@ -1,11 +1,13 @@
-"""The Interaction Graph fighter: an NPCController playing the game API."""
+"""The Interaction Graph fighter: an NPCController playing the agent protocol (agents.base), in the
+kinematic game and in physics bouts alike."""
 from __future__ import annotations
 
 import time
 
 import numpy as np
 
-from ..controller import NPCController, observe
+from igraph_fight.controller import NPCController
+from igraph_fight.agents.base import observation
 
 
 class IGAgent:
@@ -27,7 +29,9 @@ class IGAgent:
     backwards (the opponent replays frames; 96% of the shifts at depth 5 against the human proxy,
     mean -8.4 frames) and the opponent's hits drop (human proxy: 6.5 -> 0.5 per 60 s bout at
     depth 5). Use "self" or False where the opponent must not be touched.
-    Counts decisions, off-graph decisions, snapping displacement and decision time for reports.
+    Snapping needs a view that can be edited (the kinematic FightState); physics bouts use
+    ``snap=False``. Counts decisions, off-graph decisions, snapping displacement and decision time
+    for reports (zeroed by reset).
     """
 
     def __init__(self, controller: NPCController, name: str | None = None, snap: bool | str = "self") -> None:
@@ -41,12 +45,23 @@ class IGAgent:
         self.snap_rad: list[float] = []
         self.snap_frames: list[int] = []
 
-    def reset(self, game, player: int, rng: np.random.Generator) -> None:
-        pass
+    def reset(self, arena, player: int, rng: np.random.Generator) -> None:
+        self.decisions = 0
+        self.off_graph = 0
+        self.decision_s = 0.0
+        self.snap_m, self.snap_rad, self.snap_frames = [], [], []
+
+    def set_style(self, style) -> None:
+        """Switch style at run time (the policy table recomputed; blocks until it is live)."""
+        self.controller.set_style(style, wait=True)
+
+    def peek(self, view, player: int) -> int:
+        """What step() would answer, without side effects (NPCController.peek)."""
+        return self.controller.peek(observation(view, player))
 
     def step(self, state, player: int) -> int:
         t = time.perf_counter()
-        d = self.controller.act(observe(state, player))
+        d = self.controller.act(observation(state, player))
         self.decision_s += time.perf_counter() - t
         self.decisions += 1
         self.off_graph += int(d.off_graph)

@@ -26,12 +26,13 @@ from numba import njit
 from motion_graph.classify import KINDS
 from planner import edge_rewards
 
-from .. import sim
-from ..edge_features import edge_features
-from ..sim import SimTables
-from ..state import to_sample
-from .gametree import _buffers, _expand
-from .common import as_style, style_params
+from igraph_fight import sim
+from igraph_fight.build.edge_features import edge_features
+from igraph_fight.sim import SimTables
+from igraph_fight.state import to_sample
+from igraph_fight.search import child_buffers, expand_children
+from igraph_fight.agents.common import as_style
+from planner.rewards import style_params
 
 
 def dummy_tables(tables: SimTables) -> tuple[SimTables, int]:
@@ -176,9 +177,9 @@ def static_policy(tables: SimTables, style="infighter", config: StaticConfig = S
 def _act(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, V, r0, r_step, n_r, n_t, gamma, max_menu):
     """Best menu index: one simulated event per action against the dummy, W + gamma * V(landing)
     with V bilinear in (r, theta) (the _bilinear rule)."""
-    CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats = _buffers(1, max_menu)
+    CI, CF, FT, SW, W, DUR, KIND, OKIND, ORD, S, act, frm, mask, stats = child_buffers(1, max_menu)
     count = np.zeros(2, dtype=np.int64)
-    k = _expand(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, True, 0, False, CI, CF, FT, SW, W, DUR, KIND,
+    k = expand_children(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, True, 0, False, CI, CF, FT, SW, W, DUR, KIND,
                 OKIND, ORD, S, act, frm, mask, stats, count)
     best = -1
     bq = -np.inf

@@ -1,0 +1,206 @@
+"""`igraph-fight build` and `igraph-fight graph info|export` commands (thin: parse, call, print)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import time
+from pathlib import Path
+
+
+def _pair(text: str) -> tuple[float, float]:
+    """'R,DEG' -> (metres, radians)."""
+    try:
+        r, d = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected R_M,DEGREES (e.g. 0.05,10), got {text!r}") from None
+    if r <= 0 or d <= 0:
+        raise argparse.ArgumentTypeError("tolerances must be positive")
+    return r, math.radians(d)
+
+
+def _share_deg(text: str) -> tuple[float, float]:
+    """'SHARE,DEG' -> (share in [0, 1], degrees in (0, 180])."""
+    try:
+        share, deg = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SHARE,DEGREES (e.g. 0.75,30), got {text!r}") from None
+    if not 0 <= share <= 1 or not 0 < deg <= 180:
+        raise argparse.ArgumentTypeError("the share must be in [0, 1] and the angle in (0, 180] degrees")
+    return share, deg
+
+
+def register(sub) -> None:
+    p = sub.add_parser("build", help="explore, cluster and link an Interaction Graph from mocap or a library",
+                       description="Build an Interaction Graph. The sampler's archive is checkpointed to "
+                                   "OUT.ckpt/ after every chunk: rerunning an interrupted command resumes it.")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--mocap", nargs="+", metavar="DIR_OR_FILE", help="mocap folder(s) or .bvh/.amc files")
+    src.add_argument("--library", metavar="LIB", help="a saved action library (.npz) instead of --mocap")
+    p.add_argument("--out", required=True, help="graph file to write (.igz)")
+    p.add_argument("--max-samples", type=int, default=None, help="sampler archive size (default 600000)")
+    p.add_argument("--min-new", type=int, default=None,
+                   help="stop when a sampler round adds fewer new samples than this (default 0: off)")
+    p.add_argument("--tolerance", type=_pair, default=None, metavar="R_M,DEG",
+                   help="snapping tolerance of the clustering (default 0.05,10)")
+    p.add_argument("--link-tolerance", type=_pair, default=None, metavar="R_M,DEG",
+                   help="landing tolerance of an edge around its target state (default 0.15,30)")
+    p.add_argument("--f0", type=int, default=None, help="frame window F0 of the other's clip (default 10)")
+    p.add_argument("--n-initial", type=int, default=None, help="initial states of the sampler (default 64)")
+    p.add_argument("--initial-facing", type=_share_deg, default=None, metavar="SHARE,DEG",
+                   help="share of the sampler's initial states with both fighters within +-DEG of facing "
+                        "each other (default 0.75,30; the rest take any angle)")
+    p.add_argument("--seed-bouts", type=int, default=None, metavar="N",
+                   help="also start the sampler from the decision states of N reward-free bouts "
+                        "(30 s each; igraph_fight.seeding; default 1024)")
+    p.add_argument("--seed-pairing", choices=("human", "random"), default=None,
+                   help="seed bouts between two human proxies (default) or a human proxy and a random fighter")
+    p.add_argument("--next-threshold", type=float, default=None,
+                   help="with --mocap: Next(a) pose threshold of the library (m, default 0.20)")
+    p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
+    p.add_argument("--guard", type=float, default=None, metavar="RADIUS_M",
+                   help="block strikes at the other's forearms (capsules of this radius, e.g. 0.05; default: no guard)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sampler's initial states (default 0)")
+    p.add_argument("--workers", type=int, default=1, help="threads (0: all cores); the result does not depend on it")
+    p.add_argument("--checkpoint", default=None, help="checkpoint folder (default OUT.ckpt)")
+    p.add_argument("--restart", action="store_true", help="discard an existing checkpoint and start over")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_build)
+
+    g = sub.add_parser("graph", help="inspect or export an Interaction Graph file")
+    gsub = g.add_subparsers(dest="graph_command", metavar="SUBCOMMAND")
+    gsub.required = True
+    q = gsub.add_parser("info", help="states, edges, groups, degrees, snapping, dead ends, content hash")
+    q.add_argument("file")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=cmd_info)
+    q = gsub.add_parser("export", help="export to GraphML (networkx) for analysis")
+    q.add_argument("file")
+    q.add_argument("--out", required=True, help="output file (.graphml)")
+    q.set_defaults(func=cmd_export)
+
+
+def _options(args: argparse.Namespace):
+    import dataclasses
+
+    from igraph_fight.build.pipeline import BuildOptions
+    from igraph_fight.sim import SimParams
+
+    kw = {}
+    if args.max_samples is not None:
+        kw["max_samples"] = args.max_samples
+    if args.min_new is not None:
+        kw["min_new_per_round"] = args.min_new
+    if args.tolerance is not None:
+        kw["tol_r_m"], kw["tol_theta_rad"] = args.tolerance
+    if args.link_tolerance is not None:
+        kw["link_tol_r_m"], kw["link_tol_theta_rad"] = args.link_tolerance
+        d = BuildOptions()
+        kw["dedup_r_m"] = min(d.dedup_r_m, kw["link_tol_r_m"])
+        kw["dedup_theta_rad"] = min(d.dedup_theta_rad, kw["link_tol_theta_rad"])
+    if args.f0 is not None:
+        kw["f0"] = args.f0
+    if args.n_initial is not None:
+        kw["n_initial"] = args.n_initial
+    if args.seed_bouts is not None:
+        kw["seed_bouts"] = args.seed_bouts
+    if args.seed_pairing is not None:
+        kw["seed_pairing"] = args.seed_pairing
+    if args.initial_facing is not None:
+        kw["initial_facing_share"], kw["initial_facing_deg"] = float(args.initial_facing[0]), float(args.initial_facing[1])
+    if args.no_prune:
+        kw["prune_dead_ends"] = False
+    if getattr(args, "guard", None) is not None:
+        kw["sim"] = SimParams(guard_radius_m=args.guard)
+    opts = dataclasses.replace(BuildOptions(), **kw)
+    opts.validate()
+    return opts
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from motion_graph.library import LibraryParams, build_library, load_library
+
+    from igraph_fight.build.pipeline import build_fingerprint, build_graph
+    from igraph_fight.build.explore import read_checkpoint_header
+    from igraph_fight.graph import library_fingerprint
+
+    t0 = time.perf_counter()
+    try:
+        options = _options(args)
+    except ValueError as e:
+        print(f"igraph-fight: error: {e}", file=sys.stderr)
+        return 2
+    show = not args.quiet and sys.stderr.isatty()
+    if args.library:
+        lib = load_library(args.library)
+    else:
+        params = LibraryParams()
+        if args.next_threshold is not None:
+            params = LibraryParams(next_threshold_m=args.next_threshold)
+        lib = build_library(args.mocap, params, progress=show)
+    ckpt = Path(args.checkpoint) if args.checkpoint else Path(str(args.out) + ".ckpt")
+    if args.restart and ckpt.exists():
+        shutil.rmtree(ckpt)
+    archive = ckpt / "archive.npz"
+    if archive.exists():
+        header = read_checkpoint_header(archive)
+        if header.get("fingerprint") != build_fingerprint(library_fingerprint(lib), options, args.seed):
+            print(f"igraph-fight: error: {ckpt} holds an interrupted build with other inputs or options; "
+                  f"rerun the same command to resume it, or add --restart to discard it", file=sys.stderr)
+            return 2
+        if show and not args.json:
+            print(f"resuming from {ckpt} ({header.get('n')} samples)", file=sys.stderr)
+    graph, rep = build_graph(lib, options, seed=args.seed, workers=args.workers, checkpoint_dir=ckpt, progress=show)
+    graph.save(args.out)
+    rep["graph_seconds"] = rep["build_seconds"]
+    rep["build_seconds"] = time.perf_counter() - t0
+    rep["out"] = str(args.out)
+    if args.json:
+        print(json.dumps(rep))
+        return 0
+    print(f"{rep['n_states']} states, {rep['n_edges']} edges (mean out-degree {rep['mean_out_degree']:.1f}) "
+          f"from {rep['n_samples']} samples in {rep['build_seconds']:.1f} s, peak memory {rep['peak_rss_mb']:.0f} MiB")
+    print(f"dead ends {100 * rep['dead_end_fraction']:.1f}% (pruned {rep['pruned_states']} of "
+          f"{rep['n_states_before_pruning']} states); snapping mean {rep['snap_mean_cm']:.1f} cm / "
+          f"{rep['snap_mean_deg']:.1f} deg, max {rep['snap_max_cm']:.1f} cm / {rep['snap_max_deg']:.1f} deg; "
+          f"edge landing mean {rep['edge_snap_mean_cm']:.1f} cm / {rep['edge_snap_mean_deg']:.1f} deg")
+    print(f"content hash {rep['content_hash']}")
+    print(f"graph written to {args.out}")
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from igraph_fight.graph import InteractionGraph
+
+    info = InteractionGraph.load(args.file).info()
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    print(f"{info['path']}: {info['format']} v{info['version']} (package {info['package_version']}, "
+          f"created {info['created']}, seed {info['seed']})")
+    print(f"  {info['n_states']} states in {info['n_groups']} groups, {info['n_edges']} edges "
+          f"(mean out-degree {info['mean_out_degree']:.2f}), dead ends {100 * info['dead_end_fraction']:.1f}%")
+    hist = info["degree_histogram"]
+    print("  out-degree histogram: " + ", ".join(f"{k}:{v}" for k, v in list(hist.items())[:25])
+          + (" ..." if len(hist) > 25 else ""))
+    if info["snap_mean_cm"] is not None:
+        print(f"  snapping sample->state: mean {info['snap_mean_cm']:.2f} cm / {info['snap_mean_deg']:.2f} deg, "
+              f"max {info['snap_max_cm']:.2f} cm / {info['snap_max_deg']:.2f} deg")
+    print(f"  edge landing -> target: mean {info['edge_snap_mean_cm']:.2f} cm / {info['edge_snap_mean_deg']:.2f} deg, "
+          f"max {info['edge_snap_max_cm']:.2f} cm / {info['edge_snap_max_deg']:.2f} deg")
+    print(f"  edges by action kind: {info['edges_by_kind']}; with damage given {info['edges_with_damage_given']}, "
+          f"received {info['edges_with_damage_received']}")
+    print(f"  library {info['library_fingerprint'][:16]}..., content hash {info['content_hash']}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from igraph_fight.graph import InteractionGraph, export_graphml
+
+    g = InteractionGraph.load(args.file)
+    export_graphml(g, args.out)
+    print(f"{g.n_states} nodes, {g.n_edges} edges written to {args.out}")
+    return 0

@@ -1,0 +1,1 @@
+"""Probe scripts cited by the research notes (``python -m research.probes.NAME`` from the repository root)."""

@@ -42,8 +42,21 @@ def register(subparsers) -> None:
         q.add_argument("--seed", type=int, default=0, help="random seed of the walks (default 0)")
         q.add_argument("--actions", type=int, default=20, help="actions per walk (default 20)")
 
-    e = sub.add_parser("eval", help="random walks through the action graph, tracked; completion, time to fall, error")
+    e = sub.add_parser("eval", help="random walks through the action graph, tracked; completion, time to fall, error",
+                       description="The walk protocol (docs/protocols.md, Tracking). With --assist the batched "
+                                   "environment at 120 Hz runs it: --assist learned is the assisted tracker with its own "
+                                   "bounded wrench, --assist fixed PD with the fixed wrench, --assist none plain physics "
+                                   "(--controller learned: the assisted tracker's policy with its wrench off). Without "
+                                   "--assist the legacy tracking environment runs --controller pd|balance|learned.")
     source_args(e)
+    e.add_argument("--assist", choices=("none", "fixed", "learned"), default=None,
+                   help="the balance assist: none (physics), fixed (a PD wrench toward the reference root pose) or "
+                        "learned (the assisted tracker's own); figures are labelled assisted physics (cap C mg)")
+    e.add_argument("--cap", type=float, default=None,
+                   help="assist cap in body weights (force c*mg, torque c*mg*1 m); default 0.5 for fixed, the "
+                        "policy's own for learned")
+    e.add_argument("--parallel", type=int, default=8, help="walks simulated side by side in one process (batched "
+                   "env; default 8; the figures do not depend on it except the real-time factor)")
     e.add_argument("--walks", type=int, default=100, help="number of walks (default 100)")
     e.add_argument("--json", action="store_true", help="print the metrics as JSON")
     e.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -69,6 +82,20 @@ def register(subparsers) -> None:
                                    "checkpoint and a learning-curve PNG next to it.")
     add_train_arguments(t)
     t.set_defaults(func=cmd_train)
+
+    ta = sub.add_parser("train-assisted", help="train the assisted tracker (PPO on the batched env, one core)",
+                        description="Train or continue (--resume) the assisted tracker: one policy over the action "
+                                    "library that outputs PD-target residuals and a bounded balance wrench, the cap "
+                                    "lowered while the running completion stays high. Writes a resumable checkpoint "
+                                    "and a learning-curve PNG next to it.")
+    ta.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+    ta.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
+    ta.add_argument("--out", required=True, help="checkpoint to write (.pt), atomically, every few minutes and at the end")
+    ta.add_argument("--resume", help="continue from this checkpoint (its config, optimiser, curriculum and budget)")
+    ta.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="override an AssistedTrainConfig field (repeatable), e.g. --set n_envs=16")
+    ta.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ta.set_defaults(func=cmd_train_assisted)
 
     m = sub.add_parser("model", help="write the generated MJCF of a skeleton (calibrated on the file's motion)")
     m.add_argument("file", help=".bvh or .amc file")
@@ -124,6 +151,8 @@ def cmd_eval(args) -> int:
     if args.walks < 1 or args.actions < 1:
         print("igraph-fight tracker eval: --walks and --actions must be >= 1", file=sys.stderr)
         return 2
+    if getattr(args, "assist", None) is not None or args.controller == "assisted":
+        return _eval_batched(args)
     try:
         controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
@@ -136,6 +165,61 @@ def cmd_eval(args) -> int:
         print(json.dumps(metrics, indent=2))
     else:
         print(format_report(metrics))
+    return 0
+
+
+def _eval_batched(args) -> int:
+    """`tracker eval --assist ...`: the walk protocol on the batched env (tracker.track.protocol)."""
+    from dataclasses import replace
+
+    from tracker.track.assist import AssistConfig
+    from tracker.track.assisted_policy import CheckpointError, load_assisted
+    from tracker.track.batch_env import BatchConfig
+    from tracker.track.evaluation import draw_walks, make_setup
+    from tracker.track.pd import STANCE_GAINS, PDTracker, batched_model_options
+    from tracker.track.protocol import format_summary, run_walks, summarise
+    from tracker.track.walks import walk_source
+    assist = args.assist or "learned"
+    name = "learned" if args.controller in ("learned", "assisted") else args.controller
+    if name not in ("pd", "learned"):
+        print("igraph-fight tracker eval: with --assist the controller is pd or learned (the assisted tracker)",
+              file=sys.stderr)
+        return 2
+    if assist == "learned" and name != "learned":
+        print("igraph-fight tracker eval: --assist learned needs --controller learned", file=sys.stderr)
+        return 2
+    if args.cap is not None and not 0.0 < args.cap <= 2.0:
+        print("igraph-fight tracker eval: --cap must lie in (0, 2] body weights", file=sys.stderr)
+        return 2
+    if args.parallel < 1:
+        print("igraph-fight tracker eval: --parallel must be >= 1", file=sys.stderr)
+        return 2
+    if name == "learned":
+        try:
+            ctrl = load_assisted(args.ckpt, assist_off=assist == "none")
+        except CheckpointError as e:
+            print(f"igraph-fight tracker eval: {e}", file=sys.stderr)
+            return 2
+        if assist == "fixed":
+            ctrl.assist_off = True
+        cfg_a = ctrl.assist_config() if assist == "learned" else AssistConfig(assist, 0.0 if assist == "none" else 0.5)
+        hz = ctrl.physics_hz
+    else:
+        ctrl = PDTracker(class_scale=STANCE_GAINS)
+        cfg_a = AssistConfig(assist, 0.0 if assist == "none" else 0.5)
+        hz = 120.0
+    if args.cap is not None and assist != "none":
+        cfg_a = replace(cfg_a, cap=float(args.cap))
+    if args.physics_hz != 240.0:           # the flag's legacy default: the batched env's default rate is 120 Hz
+        hz = float(args.physics_hz)
+    src = walk_source(args.library, args.mocap, args.clips)
+    setup = make_setup(src, batched_model_options(hz))
+    walks = draw_walks(src, args.walks, args.actions, args.seed)
+    config = BatchConfig(assist=cfg_a)
+    runs, timing = run_walks(setup, ctrl, walks, config, parallel=args.parallel, progress=args.progress)
+    m = summarise(runs, ctrl, config, timing, args.actions, args.seed, float(setup.spec.mass_kg))
+    m["physics_hz"] = hz
+    print(json.dumps(m, indent=2) if args.json else format_summary(m))
     return 0
 
 
@@ -191,6 +275,24 @@ def cmd_render(args) -> int:
 def cmd_train(args) -> int:
     from tracker.learn.train_tracker import main_args
     return main_args(args)
+
+
+def cmd_train_assisted(args) -> int:
+    from tracker.learn.overrides import parse_config_overrides
+    from tracker.learn.train_assisted import AssistedTrainConfig, train
+    if not args.minutes > 0:
+        print("igraph-fight tracker train-assisted: --minutes must be positive", file=sys.stderr)
+        return 2
+    try:
+        cfg = AssistedTrainConfig(**parse_config_overrides(args.set or [], AssistedTrainConfig))
+    except ValueError as e:
+        print(f"igraph-fight tracker train-assisted: {e}", file=sys.stderr)
+        return 2
+    r = train(args.out, args.minutes, cfg, library=args.library, resume=args.resume, progress=not args.no_progress)
+    b = r["budget"]
+    print(f"wrote {r['out']} (and {r['out']}.png): {b['samples'] / 1e6:.2f}M samples, {b['cpu_s'] / 3600:.2f} CPU-hours "
+          f"over {b['runs']} run(s), assist cap now {r['cap']:.3f} mg")
+    return 0
 
 
 def cmd_model(args) -> int:

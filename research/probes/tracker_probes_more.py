@@ -29,7 +29,8 @@ from motion_graph.classify import KINDS
 from tracker.track.evaluation import draw_walks, make_setup, run_walk, track_reference, walk_reference
 from tracker.track.pd import PDController
 from tracker.track.policy_net import load_policy
-from tracker.track.reference import Reference, lowest_point
+from tracker.track.grounding import lowest_point
+from tracker.track.reference import Reference
 from tracker.track.walks import walk_source
 from research.probes.tracker_probes import rebuilt   # research/probes/tracker_probes.py: a Reference from edited qpos
 

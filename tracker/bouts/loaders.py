@@ -12,13 +12,33 @@ from tracker.bouts.agents import ClosingAgent
 
 
 def load_tracker(spec=None):
-    """The tracking controller of a physics bout: ``"pd"``, a policy checkpoint path, None for the
-    shipped learned policy (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it
-    is missing), or a tracker object (``reset(env)``, ``act(env, obs)`` for the two-fighter env),
-    returned as it is. The environment variable IGRAPH_FIGHT_TRACKER gives the default spec."""
+    """The tracking controller of a physics bout:
+    - ``"assisted"`` or ``"assisted:CKPT"``: the learned assisted tracker (assisted physics: its
+      own bounded wrench; tracker.track.assisted_policy), ``"assisted-off[:CKPT]"`` the same policy
+      with its assist off (physics);
+    - ``"pd-batch"``: PD tracking on the batched env, no assist; ``"pd-fixed"`` or
+      ``"pd-fixed=CAP"``: PD with the fixed assist (cap in body weights, default 0.5);
+    - ``"pd"``, a legacy policy checkpoint path, None for the shipped legacy policy
+      (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing);
+    - a tracker object (``reset(env)``, ``act(env, obs)``), returned as it is.
+    The environment variable IGRAPH_FIGHT_TRACKER gives the default spec."""
     if spec is not None and not isinstance(spec, (str, os.PathLike)):
         return spec
     spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
+    if isinstance(spec, str) and spec.split(":")[0] in ("assisted", "assisted-off"):
+        from tracker.track.assisted_policy import load_assisted
+        kind, _, path = spec.partition(":")
+        return load_assisted(path or None, assist_off=kind == "assisted-off")
+    if isinstance(spec, str) and (spec == "pd-batch" or spec.startswith("pd-fixed")):
+        from tracker.track.pd import STANCE_GAINS, PDTracker
+        if spec == "pd-batch":
+            return PDTracker(class_scale=STANCE_GAINS)
+        cap = spec.partition("=")[2]
+        try:
+            c = float(cap) if cap else 0.5
+        except ValueError:
+            raise ValueError(f"tracker {spec!r}: pd-fixed=CAP takes the cap in body weights") from None
+        return PDTracker(class_scale=STANCE_GAINS, assist_mode="fixed", assist_cap=c, name="pd-fixed")
     if isinstance(spec, str) and (spec == "search" or spec.startswith("search:")):
         raise ValueError(f"tracker {spec!r}: the bout search trackers are an offline experiment, run by "
                          "python -m research.bout_search fight|series|rl-eval --tracker search[:...]")

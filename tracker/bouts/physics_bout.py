@@ -105,6 +105,9 @@ class PhysicsBout:
     An offline search tracker (research/bout_search.py) uses these."""
 
     def __init__(self, setup: BoutSetup, agents: list, tracker, config: BoutConfig = BoutConfig()) -> None:
+        if setup.batched:             # the batched trackers run at their own physics rate
+            from dataclasses import replace
+            config = replace(config, physics_hz=setup.scene.options.physics_hz)
         if abs(config.physics_hz - setup.scene.options.physics_hz) > 1e-9:
             raise ValueError("BoutConfig.physics_hz differs from the setup's scene")
         self.setup = setup
@@ -176,6 +179,8 @@ class PhysicsBout:
         self._guess: list[tuple[int, int] | None] = [None, None]   # foresight's next action: (step, action)
         self.damage = np.zeros(2)
         self.judge.clear()
+        from tracker.track.assist import AssistStats
+        self.assist_stats = AssistStats(2)
         self._prev_v = [None, None]
         self._gap = 0.0
         self._pending = sorted(self.schedule, key=lambda x: x[0])
@@ -216,13 +221,17 @@ class PhysicsBout:
             self.tracker.idle = [f.down for f in self.F]
         if getattr(self.tracker, "aiming", False):   # and may aim the planned strikes
             self.tracker.aims = [self.planned_windows(k, env.t) for k in (0, 1)]
-        act = self.tracker.act(env, self._obs)
+        out = self.tracker.act(env, self._obs)
+        act, assist = out if isinstance(out, tuple) else (out, None)
+        act = np.array(act, dtype=np.float64, copy=True).reshape(-1)
         for f in self.F:
             if f.down:
-                sl = self.fms[f.k].ctrl_slice
-                act = np.array(act, dtype=np.float64, copy=True)
+                na = self.fms[f.k].n_act
+                sl = slice(f.k * na, (f.k + 1) * na)
                 k_ref = min(env.t + env.config.target_lead, env.t_end)
-                act[sl] = (0.0 if env.config.residual_actions else f.ref.ctrl[k_ref])
+                act[sl] = (0.0 if getattr(env.config, "residual_actions", False) else f.ref.ctrl[k_ref])
+        if self.setup.batched:
+            env.batch.assist_enabled[:] = [not f.down for f in self.F]
         self.judge.clear()
         if before_physics is not None:
             before_physics(self)
@@ -230,9 +239,17 @@ class PhysicsBout:
         # contacts are read every substep only when a fist is near a target (a fist moves less
         # than ``hook_gap_m`` in one control step)
         env.substep_hook = self.judge.substep if self._gap < self.hook_gap_m else None
-        obs, _, _, info = env.step(act)
+        n_hits = len(self.hit_events)
+        obs, _, _, info = env.step(act, assist) if self.setup.batched else env.step(act)
         t = env.t
         self._after_step(t, info)
+        if self.setup.batched:
+            b = env.batch
+            for k in (0, 1):
+                if not self.F[k].down:
+                    self.assist_stats.add(k, b.assist_force_mg[k], b.assist_torque_mgm[k], b.assist_at_cap[k])
+            for h in self.hit_events[n_hits:]:
+                h["assist_at_cap"] = bool(b.assist_at_cap[h["attacker"]])
         changed = self._falls_and_resets(t, info)
         changed |= self._decide_due(t)
         self._obs = env._obs_all() if changed else obs
@@ -375,7 +392,30 @@ class PhysicsBout:
         f.fight_heading[sl] = H + lib.path[g0:g0 + n_w, 2]
         f.ref_yaw[sl] = yaw
         f.ref.meta[f"_balance_f{k}"][sl] = c["balance"][:n_w]
+        if self.setup.batched:
+            self._write_tables(k, sl, c["tables"], n_w, Rz, tr, H, qpos[:nb] if prev is not None and prev >= 0
+                               and nb > 0 else None)
         self._hold_after(k, t0 + n_w - 1)
+
+    def _write_tables(self, k: int, sl: slice, tab: dict, n_w: int, Rz: np.ndarray, tr: np.ndarray, H: float,
+                      blended: np.ndarray | None) -> None:
+        """The batched observation's reference tables of a placed action (facing-frame rows as they
+        are, world rows rotated by the placement); blended first frames recomputed from their poses."""
+        out = self.F[k].ref.meta[f"batch_tables_{k}"]
+        out["R"][sl] = np.einsum("ij,tjk->tik", Rz, tab["R"][:n_w])
+        out["yaw"][sl] = tab["yaw"][:n_w] + H
+        out["up"][sl] = tab["up"][:n_w] @ Rz.T
+        out["ee"][sl] = tab["ee"][:n_w]
+        out["com"][sl] = tab["com"][:n_w] @ Rz.T + tr
+        out["com_vel"][sl] = tab["com_vel"][:n_w] @ Rz.T
+        out["com_feet"][sl] = tab["com_feet"][:n_w]
+        out["com_vel_f"][sl] = tab["com_vel_f"][:n_w]
+        if blended is not None and len(blended):
+            b = self.setup.tables_of(blended)
+            n = len(blended)
+            rows = slice(sl.start, sl.start + n)
+            for key in ("R", "yaw", "up", "ee", "com", "com_feet"):
+                out[key][rows] = b[key][:n]
 
     def _hold_after(self, k: int, t_last: int) -> None:
         """Fill the buffer after step t_last with that frame held still (a placeholder, so the
@@ -394,6 +434,12 @@ class PhysicsBout:
         bal = f.ref.meta[f"_balance_f{k}"]
         bal[sl] = bal[t_last]
         bal[sl, 3:6] = 0.0
+        tab = f.ref.meta.get(f"batch_tables_{k}")
+        if tab is not None:
+            for key in ("R", "yaw", "up", "ee", "com", "com_feet"):
+                tab[key][sl] = tab[key][t_last]
+            tab["com_vel"][sl] = 0.0
+            tab["com_vel_f"][sl] = 0.0
 
     def _foresee(self, k: int, t: int, record: bool = True) -> None:
         """Foresight for a search tracker's look-ahead (``tracker.foresee_steps`` > 0): past fighter
@@ -728,8 +774,14 @@ class PhysicsBout:
             if hasattr(ag, "closing"):
                 d["closing"] = ag.closing       # decisions taken by the closing rule (ClosingAgent)
             info.append(d)
+        assist, label = None, "physics (no assist)"
+        if self.setup.batched:
+            acfg = self.env.config.assist
+            mass = float(self.env.batch.mass[0])
+            assist = [self.assist_stats.summary(k, mass, acfg.cap if acfg.active else 0.0) for k in (0, 1)]
+            label = acfg.label()
         return PhysicsBoutResult(
             (self.agents[0].name, self.agents[1].name), self.sim_s, seed, hits, planned, pr, ps, psr, falls,
             self.damage.copy(), touches, self.decisions, self.hit_events, self.planned_events, self.fall_events,
             self.touch_events, self.notes, trace, rewards, wall, self.sim_s,
-            getattr(self.tracker, "describe", lambda: getattr(self.tracker, "name", "?"))(), info)
+            getattr(self.tracker, "describe", lambda: getattr(self.tracker, "name", "?"))(), info, assist, label)

@@ -40,6 +40,8 @@ class PhysicsBoutResult:
     sim_s: float
     tracker: str
     agents_info: list[dict] = field(default_factory=list)
+    assist: list[dict] | None = None   # per fighter: tracker.track.assist.summarise_assist (batched trackers)
+    physics: str = "physics (no assist)"   # how the physics is labelled (AssistConfig.label)
 
     @property
     def score(self) -> float:
@@ -92,7 +94,10 @@ class PhysicsBoutResult:
             "damage_n_a": float(self.damage_n[0]), "damage_n_b": float(self.damage_n[1]),
             "reward_a": self.reward[0], "reward_b": self.reward[1],
             "realtime_factor": self.realtime_factor, "wall_s": self.wall_s, "sim_s": self.sim_s,
-            "tracker": self.tracker, "agents": self.agents_info,
+            "tracker": self.tracker, "agents": self.agents_info, "physics_label": self.physics,
+            **({"assist_a": self.assist[0], "assist_b": self.assist[1],
+                "hits_at_cap": int(sum(1 for h in self.hit_events if h.get("assist_at_cap")))}
+               if self.assist is not None else {}),
             **{f"off_graph_{'ab'[k]}": (a["off_graph"] / max(a["decisions"], 1)) for k, a in enumerate(self.agents_info)
                if "off_graph" in a},
         }

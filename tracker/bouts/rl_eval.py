@@ -38,15 +38,16 @@ def _eval_rows(job: tuple, log=None, trk=None) -> list[dict]:
     from tracker.bouts.setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = bout_library(None, library) if library else g.load_library()
-    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
     trk = trk if trk is not None else load_tracker(tracker)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist, tracker=trk)
     rl = load_rl_agent(rl_ckpt, lib)
     spec = style if not hit_model else f"{style}+phys" + ("" if hit_model == "default" else f":{hit_model}")
     ig = make_agent(spec, g, lib, depth, first_ply=first_ply, future=future)
     npc = ig.controller
     rows = []
     for seed in seeds:
-        bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False))
+        bout = PhysicsBout(setup, [ig, rl], trk, BoutConfig(seconds=seconds, record_qpos=False,
+                                                            physics_hz=setup.scene.options.physics_hz))
         s = bout.run(seed=seed).summary()
         rows.append({k: s[k] for k in _ROW_KEYS})
         if (stats := search_stats(trk)) is not None:

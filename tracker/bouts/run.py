@@ -37,12 +37,11 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
         from motion_graph.library import load_library
         library = load_library(library)
     lib = library if library is not None else g.load_library()
-    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist, tracker=trk)
+    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     cfg = config or BoutConfig(seconds=seconds)
-    if cfg.seconds != seconds:
-        cfg = replace(cfg, seconds=seconds)
+    cfg = replace(cfg, seconds=seconds, physics_hz=setup.scene.options.physics_hz)
     bout = PhysicsBout(setup, agents, trk, cfg)
     if swap_a is not None:
         t_sw, st = swap_a
@@ -93,10 +92,11 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
     from igraph_fight.graph import load_graph
     g = load_graph(graph) if not hasattr(graph, "arrays") else graph
     lib = g.load_library()
-    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist)
-    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
     trk = load_tracker(tracker)
-    cfg = replace(config or BoutConfig(), seconds=seconds, record_qpos=False)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), root_assist=root_assist, tracker=trk)
+    agents = [make_agent(style_a, g, lib, depth_a), make_agent(style_b, g, lib, depth_b)]
+    cfg = replace(config or BoutConfig(), seconds=seconds, record_qpos=False,
+                  physics_hz=setup.scene.options.physics_hz)
     rows = []
     for i in range(n_bouts):
         bout = PhysicsBout(setup, agents, trk, cfg)

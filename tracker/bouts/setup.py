@@ -85,11 +85,15 @@ class BoutSetup:
     tables: object          # igraph_fight.sim.SimTables (the kinematic simulator of planned hits)
     game: object            # igraph_fight.game.FightGame (initial states, guard actions)
     root_assist: bool = False
+    batched: bool = False   # the env is a tracker.bouts.bout_env.BoutEnv (assisted tracker, PD tracker)
 
     @classmethod
-    def create(cls, library, physics_hz: float = 240.0, sim_params=None, root_assist: bool = False) -> "BoutSetup":
+    def create(cls, library, physics_hz: float = 240.0, sim_params=None, root_assist: bool = False,
+               tracker=None) -> "BoutSetup":
         """root_assist: hold each pelvis on its reference with a weld (ModelOptions.root_assist):
-        NOT physics (a fighter cannot fall), a labelled diagnostic only."""
+        NOT physics (a fighter cannot fall), a labelled diagnostic only. ``tracker``: a batched
+        tracker (``batched`` true: the assisted tracker, PDTracker) gets the batched environment at
+        its physics rate with its assist and grounded per-action references."""
         from igraph_fight.game import FightGame, GameConfig
         from igraph_fight.sim import SimParams, SimTables
 
@@ -99,14 +103,24 @@ class BoutSetup:
         if abs(src.fps - 30.0) > 1e-6:
             raise ValueError(f"physics bouts need a 30 fps library (control rate), got {src.fps}")
         spec = fighter_spec(src.skeleton, src.calibration_motions())
+        sp = sim_params if sim_params is not None else SimParams()
+        tables = SimTables.from_library(library, sp)
+        game = FightGame(library, GameConfig(sim=sp), tables=tables)
+        if getattr(tracker, "batched", False):
+            from tracker.bouts.bout_env import BoutEnv
+            from tracker.track.batch_env import BatchConfig
+            if root_assist:
+                raise ValueError("the root weld is a diagnostic of the legacy tracker, not of batched trackers")
+            hz = float(getattr(tracker, "physics_hz", 120.0))
+            from tracker.track.pd import batched_model_options
+            scene = build_fighter_scene(spec, 2, batched_model_options(hz))
+            env = BoutEnv(scene, BatchConfig(assist=tracker.assist_config()))
+            return cls(library, scene, env, 0.0, tables, game, False, True)
         scene = build_fighter_scene(spec, 2, ModelOptions(physics_hz=physics_hz, root_assist=root_assist))
         env = TrackingEnv(scene, EnvConfig(terminate_on_fall=False))
         # One constant lift for every action (per-action "auto" lifts would make the reference
         # jump vertically at transitions): the lift "auto" finds on the whole library.
         lift = build_reference(src.calibration_motions()[0], scene, 0, lift="auto").penetration.lift_m
-        sp = sim_params if sim_params is not None else SimParams()
-        tables = SimTables.from_library(library, sp)
-        game = FightGame(library, GameConfig(sim=sp), tables=tables)
         return cls(library, scene, env, float(lift), tables, game, root_assist)
 
     def __post_init__(self) -> None:
@@ -119,9 +133,18 @@ class BoutSetup:
 
     def action_reference(self, a: int) -> dict:
         """Reference of action ``a`` alone at the origin placement (frame 0 pelvis on the ground
-        origin, fighting direction 0), lifted by ``lift_m``; cached. Placement-invariant parts
-        (joints, PD targets, balance features in the facing frame) are reused as they are."""
+        origin, fighting direction 0), lifted by ``lift_m`` (grounded frame by frame for a batched
+        env); cached. Placement-invariant parts (joints, PD targets, balance features in the facing
+        frame) are reused as they are."""
         c = self._refs.get(a)
+        if c is None and self.batched:
+            from tracker.track.batch_env import reference_tables
+            mo = self.library.sequence_motion([int(a)], 0)
+            ref = build_reference(mo, self.scene, 0, lift="ground")
+            tab = reference_tables(ref, self.env.batch.layouts[0], self.scene, 0)
+            c = {"qpos": ref.qpos, "qvel": ref.qvel, "ctrl": ref.ctrl, "ctrl_vel": ref.ctrl_vel, "sites": ref.sites,
+                 "balance": np.zeros((ref.n_frames, 12)), "yaw": tab["yaw"], "tables": tab}
+            self._refs[a] = c
         if c is None:
             from tracker.track.policy_net import reference_balance
             mo = self.library.sequence_motion([int(a)], 0)
@@ -134,6 +157,15 @@ class BoutSetup:
                  "balance": bal, "yaw": ground_yaws(ref.qpos[:, 3:7], self.env._cache[0].lateral)}
             self._refs[a] = c
         return c
+
+    def tables_of(self, qpos: np.ndarray) -> dict:
+        """The batched env's per-frame reference tables (tracker.track.batch_env.reference_tables)
+        of qpos rows of one fighter (blended frames of an online reference)."""
+        from tracker.track.batch_env import reference_tables
+        fm = self.scene.fighters[0]
+        ref = Reference(30.0, qpos, np.zeros((len(qpos), fm.nv)), np.zeros((len(qpos), fm.n_act)),
+                        np.zeros((len(qpos), fm.n_act)), self.sites_of(qpos), FootPenetration.from_depths(np.zeros(1)))
+        return reference_tables(ref, self.env.batch.layouts[0], self.scene, 0)
 
     def sites_of(self, qpos: np.ndarray) -> np.ndarray:
         """Joint-site world positions (N, S, 3) of qpos rows of one fighter."""
@@ -188,6 +220,12 @@ class FighterState:
         self.ref = Reference(30.0, np.zeros((T, nq)), np.zeros((T, nv)), np.zeros((T, na)), np.zeros((T, na)),
                              np.zeros((T, ns, 3)), pen, "physics bout", {f"_balance_f{k}": np.zeros((T, 12))})
         self.ref.qpos[:, 3] = 1.0
+        if setup.batched:       # the batched observation's tables, written with the reference
+            ne = len(setup.env.batch.ee)
+            self.ref.meta[f"batch_tables_{k}"] = dict(
+                n=T, R=np.tile(np.eye(3), (T, 1, 1)), yaw=np.zeros(T), up=np.tile([0.0, 0.0, 1.0], (T, 1)),
+                ee=np.zeros((T, ne, 3)), com=np.zeros((T, 3)), com_vel=np.zeros((T, 3)), com_feet=np.zeros((T, 3)),
+                com_vel_f=np.zeros((T, 3)))
         self.fight_heading = np.zeros(T)   # reference fighting direction per step (mocap heading, rad)
         self.ref_yaw = np.zeros(T)         # reference pelvis hip-line yaw (MuJoCo, rad)
         self.segments: list[ActionSegment] = []

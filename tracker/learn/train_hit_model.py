@@ -112,8 +112,8 @@ def _collect_worker(args: tuple) -> dict:
     from tracker.bouts.setup import BoutConfig, BoutSetup
     g = load_graph(graph)
     lib = g.load_library()
-    setup = BoutSetup.create(lib, sim_params=g.sim_params())
     trk = load_tracker(tracker)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), tracker=trk)
     rl = load_rl_agent(rl_ckpt, lib)
     nf = np.asarray(lib.n_frames, dtype=np.int64)
     hm = load_hit_model(hit_model) if hit_model else None

@@ -45,13 +45,14 @@ class _Worker:
         torch.set_num_threads(1)
         self.cfg = cfg
         self.lib = bout_library(graph, library)
-        self.setup = BoutSetup.create(self.lib)
         self.tracker = load_tracker(tracker)
+        self.setup = BoutSetup.create(self.lib, tracker=self.tracker)
         self.nf = np.asarray(self.lib.n_frames, dtype=np.int64)
         self.A = self.lib.n_actions
         self.obs_dim = 5 + 2 * self.A + 3 + N_PHYS
         self.nets = [ActorCritic(self.obs_dim, self.A, cfg.hidden) for _ in range(2)]
-        self.bcfg = BoutConfig(seconds=cfg.episode_s, record_qpos=False)
+        self.bcfg = BoutConfig(seconds=cfg.episode_s, record_qpos=False,
+                               physics_hz=self.setup.scene.options.physics_hz)
         self.rng = np.random.default_rng([cfg.seed, wid])
         self.wid = wid
 

@@ -84,3 +84,66 @@ class PDController:
         if env.config.residual_actions:
             return np.zeros(env.n_act)
         return env.reference_targets()
+
+
+@dataclass
+class PDTracker:
+    """PD tracking on the batched environment (tracker.track.batch_env): the reference's joint
+    targets one control step ahead, no residuals; the env's assist mode decides any wrench.
+
+    Attributes:
+        kp_scale, kd_ratio, torque_scale: as PDController's.
+        class_scale: extra stiffness and torque factors per segment class (tracker.body.humanoid.KP
+            keys), e.g. (("foot", 2.0),): the stance gains a body needs to stand still.
+    """
+
+    kp_scale: float = 1.0
+    kd_ratio: float = 0.2
+    torque_scale: float = 1.0
+    class_scale: tuple = ()
+    name: str = "pd"
+    assist_mode: str = "none"
+    assist_cap: float = 0.0
+
+    def gains(self, fighter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kp, kd, torque limit) per actuator of a BodyMap."""
+        s2 = (fighter.spec.height_m / 1.7) ** 2
+        extra = dict(self.class_scale)
+        kp = np.array([KP.get(c, KP["other"]) * extra.get(c, 1.0) for c in fighter.act_class]) * self.kp_scale * s2
+        tq = np.array([TORQUE.get(c, TORQUE["other"]) * extra.get(c, 1.0) for c in fighter.act_class]) \
+            * self.torque_scale * s2
+        return kp, kp * self.kd_ratio, tq
+
+    batched = True
+
+    def reset(self, env) -> None:
+        for k, f in enumerate(env.scene.fighters):
+            kp, kd, tq = self.gains(f)
+            env.set_gains(kp, kd, k)
+            env.set_torque_limits(tq, k)
+
+    def act(self, env, obs: np.ndarray) -> tuple[np.ndarray, None]:
+        return env.reference_targets(), None
+
+    def assist_config(self):
+        """The assist this controller runs with: none, or the env's fixed PD at its cap."""
+        from tracker.track.assist import AssistConfig
+        return AssistConfig(self.assist_mode, self.assist_cap)
+
+    def describe(self) -> str:
+        extra = ", ".join(f"{c} x{v:g}" for c, v in self.class_scale)
+        a = f", fixed assist cap {self.assist_cap:g} mg" if self.assist_mode == "fixed" else ""
+        return f"PD tracking (kp x{self.kp_scale:g}{', ' + extra if extra else ''}){a}"
+
+
+#: the stance gains of the batched trackers (factors on the KP and TORQUE tables): legs a little stiffer,
+#: ankles and toes stiff enough to carry the body (a quiet stance held 10 s with no assist:
+#: tests/test_batch_env.py), and the protocol walks under plain PD no worse than at the table's gains
+STANCE_GAINS = (("thigh", 1.5), ("shin", 1.5), ("foot", 5.0), ("toe", 5.0))
+
+
+def batched_model_options(physics_hz: float = 120.0):
+    """The humanoid's options for the batched trackers: 120 Hz physics and the joint armature
+    (0.05 kg m^2) that keeps the stance gains stable at that rate."""
+    from tracker.body.humanoid import ModelOptions
+    return ModelOptions(physics_hz=physics_hz, armature=0.05)

@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 from motion_graph.motion import Motion
 
 from tracker.body.humanoid import C_MOCAP_TO_MJ, BodyMap, FighterScene
+from tracker.track.grounding import floor_report, foot_heights, ground_heights, lowest_point
 
 
 @dataclass
@@ -204,23 +205,6 @@ def site_positions(scene: FighterScene, fighter: BodyMap, qpos: np.ndarray) -> t
     return sites, low
 
 
-def lowest_point(m: mujoco.MjModel, d: mujoco.MjData, geoms: np.ndarray) -> np.ndarray:
-    """World z of the lowest point of each geom (spheres, capsules, boxes; others by bounding sphere)."""
-    geoms = np.asarray(geoms, dtype=int)
-    z = d.geom_xpos[geoms, 2]
-    size = m.geom_size[geoms]
-    typ = m.geom_type[geoms]
-    Rz = np.abs(d.geom_xmat[geoms, 6:9])         # world-z row of each geom's rotation
-    out = z - m.geom_rbound[geoms]
-    sph = typ == mujoco.mjtGeom.mjGEOM_SPHERE
-    out[sph] = z[sph] - size[sph, 0]
-    cap = typ == mujoco.mjtGeom.mjGEOM_CAPSULE
-    out[cap] = z[cap] - Rz[cap, 2] * size[cap, 1] - size[cap, 0]
-    box = typ == mujoco.mjtGeom.mjGEOM_BOX
-    out[box] = z[box] - (Rz[box] * size[box]).sum(axis=1)
-    return out
-
-
 def build_reference(motion: Motion, scene: FighterScene, fighter: int = 0, fps: float | None = None,
                     placement: tuple[np.ndarray, np.ndarray] | None = None, lift: str | float = "auto") -> Reference:
     """Convert a Motion into a Reference for one fighter of a scene.
@@ -233,12 +217,15 @@ def build_reference(motion: Motion, scene: FighterScene, fighter: int = 0, fps: 
             percentile of the per-frame lowest foot point goes to the floor, so typical stance frames
             neither sink into nor float above it; negative when the whole reference floats), "p90"
             (lift by the 90th percentile of the per-frame penetration, never down), "max" (no
-            penetration at all), "none", or metres (positive up).
+            penetration at all), "ground" (frame by frame: the lower foot on the floor in every
+            supported frame, tracker.track.grounding), "none", or metres (positive up).
     """
     fm = scene.fighters[fighter]
     if fps is not None and abs(fps - motion.fps) > 1e-9:
         motion = motion.resample(fps)
     qpos = motion_qpos(motion, fm, placement)
+    if lift == "ground":
+        return _grounded_reference(motion, scene, fm, qpos)
     sites, low = site_positions(scene, fm, qpos)
     depth0 = np.maximum(-low, 0.0)
     if isinstance(lift, str):
@@ -263,6 +250,22 @@ def build_reference(motion: Motion, scene: FighterScene, fighter: int = 0, fps: 
     pen = FootPenetration.from_depths(-low, lift_m)
     return Reference(motion.fps, qpos, qvel, ctrl, ctrl_vel, sites, pen, motion.source,
                      dict(penetration_before_lift=FootPenetration.from_depths(depth0).as_dict()))
+
+
+def _grounded_reference(motion: Motion, scene: FighterScene, fm: BodyMap, qpos: np.ndarray) -> Reference:
+    """build_reference with lift="ground": the root height offset frame by frame (grounding module)."""
+    feet0, com = foot_heights(scene, fm, qpos)
+    off = ground_heights(feet0, com, motion.fps)
+    qpos = qpos.copy()
+    qpos[:, 2] += off
+    sites, low = site_positions(scene, fm, qpos)
+    feet1 = feet0 + off[:, None]
+    qvel = qpos_velocity(qpos, fm, motion.fps)
+    ctrl, ctrl_vel = ctrl_targets(qpos, qvel, fm)
+    pen = FootPenetration.from_depths(-low, float(np.mean(off)) if len(off) else 0.0)
+    meta = dict(penetration_before_lift=FootPenetration.from_depths(np.maximum(-feet0.min(axis=1), 0.0)).as_dict(),
+                floor_before=floor_report(feet0), floor_after=floor_report(feet1), ground_offset_m=off)
+    return Reference(motion.fps, qpos, qvel, ctrl, ctrl_vel, sites, pen, motion.source, meta)
 
 
 def kinematic_error(motion: Motion, reference: Reference, fighter: BodyMap) -> np.ndarray:

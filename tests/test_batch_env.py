@@ -1,0 +1,139 @@
+"""The batched tracking environment, the grounded reference, the balance assist and the stance."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.realdata
+
+
+@pytest.fixture(scope="module")
+def setup(boxing_library):
+    from tracker.track.evaluation import make_setup
+    from tracker.track.pd import batched_model_options
+    from tracker.track.walks import LibraryWalks
+    s = make_setup(LibraryWalks(boxing_library), batched_model_options())
+    return s
+
+
+@pytest.fixture(scope="module")
+def refs(setup):
+    from tracker.track.evaluation import draw_walks, walk_reference
+    return [walk_reference(setup, w, lift="ground")[1] for w in draw_walks(setup.source, 3, 3, 7)]
+
+
+def _env(setup, n, mode="none", cap=0.5):
+    from tracker.track.assist import AssistConfig
+    from tracker.track.batch_env import BatchConfig, BatchEnv
+    from tracker.track.pd import STANCE_GAINS, PDTracker
+    env = BatchEnv(setup.scene, n, BatchConfig(assist=AssistConfig(mode, cap)))
+    PDTracker(class_scale=STANCE_GAINS).reset(env)
+    return env
+
+
+@pytest.mark.parametrize("mode", ["none", "fixed", "learned"])
+def test_batched_env_equals_single_envs_step_for_step(setup, refs, mode):
+    """Three worlds stepped together give exactly what three one-world envs give."""
+    rng = np.random.default_rng(0)
+    batch = _env(setup, 3, mode)
+    singles = [_env(setup, 1, mode) for _ in range(3)]
+    batch.reset(np.arange(3), refs)
+    for i, e in enumerate(singles):
+        e.reset([0], [refs[i]])
+    for _ in range(20):
+        noise = rng.normal(0.0, 0.05, (3, batch.n_act))
+        assist = rng.uniform(-1.0, 1.0, (3, 6)) if mode == "learned" else None
+        ob, rb, db, ib = batch.step(batch.reference_targets() + noise, assist)
+        for i, e in enumerate(singles):
+            o, r, d, info = e.step(e.reference_targets() + noise[i:i + 1], None if assist is None else assist[i:i + 1])
+            assert np.array_equal(e.qpos[0], batch.qpos[i])
+            assert np.array_equal(o[0], ob[i]) and r[0] == rb[i] and d[0] == db[i]
+            assert info["fall"][0] == ib["fall"][i]
+
+
+@pytest.mark.parametrize("mode", ["fixed", "learned"])
+def test_the_assist_never_exceeds_its_cap(setup, refs, mode):
+    """However large the policy's output or the error, |F| <= c m g and |tau| <= c m g * 1 m, as
+    reported and as applied to the pelvis."""
+    from tracker.track.assist import G
+    rng = np.random.default_rng(1)
+    cap = 0.2
+    env = _env(setup, 3, mode, cap)
+    env.reset(np.arange(3), refs)
+    for d in env.datas:                       # push every pelvis 30 cm off its reference: a large error
+        d.qpos[0] += 0.3
+    env.refresh()
+    mg = env.mass * G
+    seen_cap = False
+    for _ in range(15):
+        assist = rng.normal(0.0, 50.0, (3, 6)) if mode == "learned" else None
+        env.step(env.reference_targets(), assist)
+        assert (env.assist_force_mg <= cap + 1e-12).all() and (env.assist_torque_mgm <= cap + 1e-12).all()
+        for b, d in enumerate(env.datas):
+            w = d.xfrc_applied[env.layouts[0].pelvis]
+            assert np.linalg.norm(w[:3]) <= cap * mg[b] * (1 + 1e-9)
+            assert np.linalg.norm(w[3:]) <= cap * mg[b] * (1 + 1e-9)
+        seen_cap |= bool(env.assist_at_cap.any())
+    assert seen_cap                            # the bound was reached, not just respected
+
+
+def test_grounded_reference_meets_its_tolerance(setup):
+    """Grounding puts the lower foot on the floor (within [-0.5, 1] cm) in every supported frame,
+    where the constant lift left it floating centimetres up."""
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.grounding import GroundConfig, foot_heights, ground_heights
+    from tracker.track.reference import motion_qpos
+    w = draw_walks(setup.source, 1, 10, 3)[0]
+    motion = setup.source.sequence_motion(w)
+    fm = setup.scene.fighters[0]
+    q = motion_qpos(motion, fm)
+    low, com = foot_heights(setup.scene, fm, q)
+    off = ground_heights(low, com, motion.fps)
+    z = np.convolve(np.pad(com[:, 2], 2, mode="edge"), np.ones(5) / 5, mode="valid")
+    acc = np.gradient(np.gradient(z, 1 / motion.fps), 1 / motion.fps)
+    supported = acc > -GroundConfig().flight_acc
+    lower = (low + off[:, None]).min(axis=1)[supported]
+    assert supported.mean() > 0.9
+    assert lower.min() >= -0.005 - 1e-9 and lower.max() <= 0.01 + 1e-9
+    before = low.min(axis=1) - np.percentile(low.min(axis=1), 10)   # the legacy constant lift
+    assert np.mean(before > 0.015) > 0.2                              # which floated in many frames
+
+
+def test_quiet_stance_holds_ten_seconds_without_assist(setup):
+    """With the stance gains the body stands still 10 s, no assist; at the table's gains it falls."""
+    from tracker.track.batch_env import BatchConfig, BatchEnv
+    from tracker.track.pd import STANCE_GAINS, PDTracker
+    from tracker.track.stance import quiet_stance
+    ref = quiet_stance(setup.scene, 10.0)
+    stood = {}
+    for name, gains in (("stance", STANCE_GAINS), ("table", ())):
+        env = BatchEnv(setup.scene, 1, BatchConfig())
+        PDTracker(class_scale=gains).reset(env)
+        env.reset([0], [ref])
+        n = 0
+        while not env.done[0]:
+            _, _, _, info = env.step(env.reference_targets())
+            n += 1
+        stood[name] = (n / 30.0, int(info["fall"][0]))
+    assert stood["stance"][1] == 0 and stood["stance"][0] >= 10.0 - 1e-9, stood
+    assert stood["table"][1] != 0, stood
+
+
+def test_protocol_reports_the_assist(setup):
+    """The walk protocol's summary carries the assist figures and labels the physics."""
+    from tracker.track.assist import AssistConfig
+    from tracker.track.batch_env import BatchConfig
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.pd import STANCE_GAINS, PDTracker
+    from tracker.track.protocol import run_walks, summarise
+    walks = draw_walks(setup.source, 2, 3, 0)
+    cfg = BatchConfig(assist=AssistConfig("fixed", 0.5))
+    ctrl = PDTracker(class_scale=STANCE_GAINS)
+    runs, timing = run_walks(setup, ctrl, walks, cfg, parallel=2)
+    m = summarise(runs, ctrl, cfg, timing, 3, 0, 70.0)
+    for k in ("controller", "assist", "cap_mg", "completion_rate", "mean_time_to_fall_s", "mpjpe_cm",
+              "mpjpe_rerooted_cm", "assist_force_mean_mg", "assist_force_p95_mg", "assist_torque_mean_mgm",
+              "assist_at_cap_share", "realtime_factor"):
+        assert k in m
+    assert m["assist"] == "fixed" and m["cap_mg"] == 0.5 and "assisted physics" in m["physics"]
+    assert 0.0 < m["assist_force_mean_mg"] <= 0.5

@@ -1,0 +1,32 @@
+"""The assisted tracker's training route: a checkpoint torch reads weights-only, that the
+controller loads, and that a resumed run continues (budget, curve and curriculum carried over)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.realdata
+
+
+def test_train_writes_a_resumable_checkpoint(tmp_path, boxing_library_file):
+    import torch
+
+    from tracker.learn.train_assisted import AssistedTrainConfig, train
+    from tracker.track.assisted_policy import load_assisted
+    cfg = AssistedTrainConfig(n_envs=2, horizon=8, pool_walks=2, walk_actions=2, hidden=(32, 32),
+                              critic_hidden=(32, 32), minibatch=8)
+    out = tmp_path / "a.pt"
+    r1 = train(str(out), 5.0, cfg, library=boxing_library_file, progress=False, log=None, max_iterations=2)
+    assert out.is_file() and (tmp_path / "a.pt.png").is_file()
+    ck = torch.load(str(out), map_location="cpu", weights_only=True)      # no pickled objects
+    assert ck["budget"]["samples"] == 2 * 2 * 8 and ck["budget"]["runs"] == 1 and len(ck["curve"]) == 2
+    ctrl = load_assisted(out)
+    assert ctrl.n_act + 6 == ctrl.act_dim and 0 < ctrl.cap <= cfg.cap_start
+    obs = np.zeros((3, ctrl.obs_dim))
+    assert ctrl.policy_output(obs).shape == (3, ctrl.act_dim)
+    r2 = train(str(out), 5.0, cfg, library=boxing_library_file, resume=str(out), progress=False, log=None,
+               max_iterations=1)
+    ck2 = torch.load(str(out), map_location="cpu", weights_only=True)
+    assert ck2["budget"]["samples"] == r1["budget"]["samples"] + 16 and ck2["budget"]["runs"] == 2
+    assert len(ck2["curve"]) == 3 and ck2["budget"]["cpu_s"] > ck["budget"]["cpu_s"]
+    assert r2["budget"]["iterations"] == 3

@@ -37,7 +37,18 @@ costs about a millisecond of CPU a decision instead of microseconds (figures: do
 
 The policy table is an immutable object; ``set_style``/``set_depth`` build a new one in a worker
 thread while the old one keeps answering, then replace the reference in one assignment, so a
-reader sees either the old or the new table, never a mix.
+reader sees either the old or the new table, never a mix. Each request records the settings it
+wants (style, depth) over the latest *requested* ones, and the worker builds the newest settings
+requested so far: ``set_style`` then ``set_depth`` in a row end with both, whatever their timing.
+
+Input contract: everything a decision passes to the numba kernels is checked first, at the API
+(``act``, ``peek``, ``locate``, ``menu_terms``, ``act_batch``), since the kernels index arrays
+with the ids unchecked. An Observation must hold finite numbers with 0 <= r <= MAX_DISTANCE_M
+and |theta| <= MAX_ANGLE_RAD, integer ids with 0 <= m_self, m_other < A (the library's actions),
+0 <= f_other < frames of m_other, and 0 <= mask_other < 2 ** (strikes of m_other); anything else
+(NaN or infinite values included: there is no fallback answer for them) raises an
+ObservationError naming the field (and the row, for batches). Depth is an integer in
+1..MAX_DEPTH and gamma a finite number in (0, 1].
 """
 from __future__ import annotations
 
@@ -66,6 +77,121 @@ from igraph_fight.sim import expand_one
 #: NPCController's first_ply choices (see the module docstring)
 FIRST_PLY = ("table", "exact", "exact2")
 
+#: Deepest min-max search a controller computes (decisions). The policy's time grows linearly with
+#: the depth (on the default graph of 5 M edges: 0.3 s at depth 5, 0.55 s at 12) and gamma = 0.5
+#: makes ply 12 weigh 0.05% of the first: deeper only blocks the policy worker.
+MAX_DEPTH = 12
+#: Largest distance r an Observation may hold (m): far beyond any arena, still exact in the
+#: kernels' integer cell arithmetic.
+MAX_DISTANCE_M = 1.0e6
+#: Largest |theta_self|, |theta_other| an Observation may hold (rad; angles are wrapped to
+#: [-pi, pi) inside, and beyond this the wrap loses precision).
+MAX_ANGLE_RAD = 1.0e6
+
+
+class ObservationError(ValueError):
+    """An observation (or a row of a batch) outside the controller's input contract (module
+    docstring). ``field`` names the offending field, ``row`` the batch row (None for one
+    observation), ``value`` what it held."""
+
+    def __init__(self, field: str, problem: str, value: object = None, row: int | None = None) -> None:
+        self.field = field
+        self.problem = problem
+        self.value = value
+        self.row = row
+        where = f"observation {field}" + (f" (row {row})" if row is not None else "")
+        got = "" if value is None else f", got {value!r}"
+        super().__init__(f"{where}: {problem}{got}")
+
+
+def _real(x, field: str) -> float:
+    """x as a float if it is a real number (not bool), else an ObservationError."""
+    if isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool):
+        try:
+            return float(x)
+        except OverflowError:
+            pass
+    raise ObservationError(field, "must be a real number", x)
+
+
+def _integer(x, field: str) -> int:
+    """x as an int if it is an integer (not bool), else an ObservationError."""
+    if isinstance(x, (int, np.integer)) and not isinstance(x, bool):
+        return int(x)
+    raise ObservationError(field, "must be an integer id", x)
+
+
+def observation_checker(n_frames, n_strikes):
+    """The contract check of one Observation for a library with ``n_frames[a]`` frames and
+    ``n_strikes[a]`` strikes per action: a function obs -> (r, theta_self, theta_other, m_self,
+    m_other, f_other, mask_other) as Python floats and ints, raising ObservationError. Plain
+    Python comparisons on values bound in its closure: a fraction of a microsecond."""
+    nf = [int(x) for x in n_frames]
+    lim = [1 << int(k) for k in n_strikes]
+    A = len(nf)
+    R, T = MAX_DISTANCE_M, MAX_ANGLE_RAD
+
+    def check(obs) -> tuple:
+        if type(obs) is Observation:
+            r, ts, to, ms, mo, fo, mk = obs
+        else:
+            try:
+                r, ts, to, ms, mo, fo = obs.r, obs.theta_self, obs.theta_other, obs.m_self, obs.m_other, obs.f_other
+                mk = getattr(obs, "mask_other", 0)
+            except AttributeError:
+                raise ObservationError("observation", "must be an Observation (r, theta_self, theta_other, m_self, "
+                                                      "m_other, f_other, mask_other)", type(obs).__name__) from None
+        if type(r) is not float:
+            r = _real(r, "r")
+        if type(ts) is not float:
+            ts = _real(ts, "theta_self")
+        if type(to) is not float:
+            to = _real(to, "theta_other")
+        if type(ms) is not int:
+            ms = _integer(ms, "m_self")
+        if type(mo) is not int:
+            mo = _integer(mo, "m_other")
+        if type(fo) is not int:
+            fo = _integer(fo, "f_other")
+        if type(mk) is not int:
+            mk = _integer(mk, "mask_other")
+        if not 0.0 <= r <= R:
+            raise ObservationError("r", f"must be a finite distance in [0, {R:g}] m", r)
+        if not -T <= ts <= T:
+            raise ObservationError("theta_self", f"must be a finite angle within +-{T:g} rad", ts)
+        if not -T <= to <= T:
+            raise ObservationError("theta_other", f"must be a finite angle within +-{T:g} rad", to)
+        if not 0 <= ms < A:
+            raise ObservationError("m_self", f"must be an action id in [0, {A})", ms)
+        if not 0 <= mo < A:
+            raise ObservationError("m_other", f"must be an action id in [0, {A})", mo)
+        if not 0 <= fo < nf[mo]:
+            raise ObservationError("f_other", f"must be a frame of action {mo}, in [0, {nf[mo]})", fo)
+        if not 0 <= mk < lim[mo]:
+            raise ObservationError("mask_other", f"must hold only the bits of action {mo}'s strikes, in "
+                                                 f"[0, {lim[mo]})", mk)
+        return r, ts, to, ms, mo, fo, mk
+
+    return check
+
+
+def check_depth(depth) -> int:
+    """``depth`` as an int if it is an integer in 1..MAX_DEPTH, else a ValueError."""
+    if not isinstance(depth, (int, np.integer)) or isinstance(depth, bool) or not 1 <= depth <= MAX_DEPTH:
+        raise ValueError(f"depth must be an integer in 1..{MAX_DEPTH}, got {depth!r}")
+    return int(depth)
+
+
+def check_gamma(gamma) -> float | None:
+    """``gamma`` as a float if it is a finite number in (0, 1] (None: the planner's default), else a
+    ValueError."""
+    if gamma is None:
+        return None
+    ok = isinstance(gamma, (int, float, np.integer, np.floating)) and not isinstance(gamma, bool)
+    if not ok or not 0.0 < float(gamma) <= 1.0:
+        raise ValueError(f"gamma must be a finite number in (0, 1], got {gamma!r}")
+    return float(gamma)
+
 
 class Observation(NamedTuple):
     """The live coupled state from the NPC's side, at the instant it must choose.
@@ -73,7 +199,8 @@ class Observation(NamedTuple):
     r: pelvis ground distance (m); theta_self / theta_other: angle between the NPC's (the
     opponent's) facing and the line to the other (rad); m_self: the action the NPC just finished;
     m_other, f_other: the opponent's action and frame; mask_other: bits of the opponent's strikes
-    already resolved whose window is still open (0 if unknown).
+    already resolved whose window is still open (bit k: m_other's k-th strike; 0 if unknown).
+    The controller checks every field (the module docstring's input contract; ObservationError).
     """
 
     r: float
@@ -328,6 +455,8 @@ class NPCController:
                  depth: int = 5, gamma: float | None = None, stochastic: bool = False, temperature: float = 0.5,
                  usage_penalty: float = 0.0, seed: int = 0, offgraph: str = "lookahead",
                  first_ply: str = "table", edge_features: dict | None = None) -> None:
+        depth = check_depth(depth)
+        gamma = check_gamma(gamma)
         if offgraph not in ("lookahead", "nearest"):
             raise ValueError("offgraph must be 'lookahead' or 'nearest'")
         if first_ply not in FIRST_PLY:
@@ -361,7 +490,9 @@ class NPCController:
         # and by Next-set id, each bucket sorted by r.
         A = library.n_actions
         self._nextset_of = nextset_ids(library)
-        mask_mod = int(a["state_mask_other"].max()) + 2 if len(a["state_mask_other"]) else 2
+        # every mask an observation may hold (< 2 ** strikes of M_other) gets a key of its own
+        n_bits = int(np.diff(np.asarray(library.strike_offsets, dtype=np.int64)).max()) if A else 0
+        mask_mod = max(int(a["state_mask_other"].max()) + 2 if len(a["state_mask_other"]) else 2, 1 << n_bits)
         self._key_args = np.array([A + 1, mask_mod], dtype=np.int64)
         ix, ix_parts, cell_w = build_index(a, A, mask_mod, self.f0)
         self._offsets = a["state_offsets"].astype(np.int64)
@@ -380,6 +511,9 @@ class NPCController:
         self._T = self.tables.kernel_tuple()
         self._kinds = np.asarray(self.tables.kinds, dtype=np.int64)
         self._kinds32 = self._kinds.astype(np.int32)
+        self._n_frames = np.asarray(self.tables.n_frames, dtype=np.int64)
+        self._mask_limit = np.left_shift(np.int64(1), np.diff(np.asarray(self.tables.strike_offsets, dtype=np.int64)))
+        self._check = observation_checker(self._n_frames, np.diff(np.asarray(self.tables.strike_offsets)))
         self._max_menu = int(max(1, np.diff(self._menu_off).max())) if A else 1
         self._count = np.zeros(2, dtype=np.int64)  # exact2: events simulated, nodes expanded
         self._pi, self._pf, self._pc = pack_index(
@@ -400,7 +534,12 @@ class NPCController:
         self._version = 0
         self.last_swap_ms: float | None = None
         style_obj = style if isinstance(style, Style) else load_style(style)
-        self._table = self._compute(style_obj, int(depth), gamma)
+        # the latest requested settings (style, depth, gamma) and their request number; the worker
+        # builds the newest (set_style / set_depth)
+        self._want = (style_obj, depth, gamma)
+        self._want_seq = 0
+        self._built_seq = 0
+        self._table = self._compute(style_obj, depth, gamma)
 
     @classmethod
     def load(cls, graph_path: str | Path, library_path: str | Path | None = None, **kwargs) -> "NPCController":
@@ -413,8 +552,7 @@ class NPCController:
 
     # ----- policy ---------------------------------------------------------------------------
     def _compute(self, style: Style, depth: int, gamma: float | None) -> _Table:
-        if depth < 1:
-            raise ValueError("depth must be >= 1")
+        depth = check_depth(depth)
         from planner import DEFAULT_GAMMA
         g = float(gamma) if gamma is not None else DEFAULT_GAMMA
         pol = compute_policy(self._arrays, style, depth, g, search_graph=self._search_graph)
@@ -470,34 +608,48 @@ class NPCController:
         """The kind names the graph's kind indices refer to."""
         return [str(k) for k in self._arrays["kinds_table"]]
 
-    def _swap_in(self, style: Style, depth: int, gamma: float | None, t_request: float) -> _Table:
-        table = self._compute(style, depth, gamma)
+    def _build_latest(self, t_request: float) -> _Table:
+        """Worker job of a request: build the newest requested settings, unless an earlier job
+        already built them (requests made while a table is computed are served by one build)."""
+        with self._lock:
+            want, seq = self._want, self._want_seq
+        if seq <= self._built_seq:
+            return self._table
+        table = self._compute(*want)
         self._table = table  # one reference assignment: atomic for readers
+        self._built_seq = seq
         self.last_swap_ms = (time.perf_counter() - t_request) * 1e3
         return table
 
-    def set_style(self, style: Style | str | Path, wait: bool = False) -> Future:
-        """Recompute the policy for a new style in the background; the old one answers meanwhile.
-        Returns a Future (result: the new table); ``wait=True`` blocks until it is live."""
-        st = style if isinstance(style, Style) else load_style(style)
-        fut = self._executor.submit(self._swap_in, st, self.depth, None, time.perf_counter())
+    def _request(self, style: Style | None = None, depth: int | None = None, wait: bool = False) -> Future:
+        """Record the wanted settings over the latest requested ones and queue a build."""
+        with self._lock:
+            st, d, g = self._want
+            self._want = (style if style is not None else st, depth if depth is not None else d, g)
+            self._want_seq += 1
+        fut = self._executor.submit(self._build_latest, time.perf_counter())
         if wait:
             fut.result()
         return fut
+
+    def set_style(self, style: Style | str | Path, wait: bool = False) -> Future:
+        """Recompute the policy for a new style in the background (at the depth last requested);
+        the old table answers meanwhile. Returns a Future whose result is a live table with this
+        style (the newest requested settings: later requests may be in it too); ``wait=True``
+        blocks until it is live. A bad style raises planner.StyleError here."""
+        st = style if isinstance(style, Style) else load_style(style)
+        return self._request(style=st, wait=wait)
 
     def set_depth(self, depth: int, wait: bool = False) -> Future:
-        """Change the search depth (strength); recomputed in the background like set_style."""
-        fut = self._executor.submit(self._swap_in, self._table.style_obj, int(depth), None, time.perf_counter())
-        if wait:
-            fut.result()
-        return fut
+        """Change the search depth (strength, an integer in 1..MAX_DEPTH: a ValueError otherwise),
+        with the style last requested; recomputed in the background like set_style."""
+        return self._request(depth=check_depth(depth), wait=wait)
 
     # ----- decisions ------------------------------------------------------------------------
-    def _lookahead(self, table: _Table, obs: Observation) -> tuple[int, float]:
-        """One exact simulated event per legal action + the graph value where it lands."""
-        a, q = _lookahead(self._T, self._pi, self._pf, self._pc, *table.la, float(obs.r), float(obs.theta_self),
-                          float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
-                          int(obs.mask_other))
+    def _lookahead(self, table: _Table, ob: tuple) -> tuple[int, float]:
+        """One exact simulated event per legal action + the graph value where it lands (``ob``:
+        a checked observation)."""
+        a, q = _lookahead(self._T, self._pi, self._pf, self._pc, *table.la, *ob)
         return int(a), float(q)
 
     def menu_terms(self, obs: Observation) -> np.ndarray:
@@ -505,30 +657,35 @@ class NPCController:
         row per action of Next(m_self), columns MT_* (action, positional cost, damage-given,
         damage-received and defence terms, gamma * graph value where it lands, then the event's
         raw sim.FT_* features). Score = -pos + given - received + def + value (what the
-        lookahead maximises); callers may replace terms, e.g. with physically measured hit odds."""
+        lookahead maximises); callers may replace terms, e.g. with physically measured hit odds.
+        ObservationError for an observation outside the input contract."""
+        ob = self._check(obs)
         table = self._table
-        m = int(obs.m_self)
+        m = ob[3]
         out = np.zeros((int(self._menu_off[m + 1] - self._menu_off[m]), N_MT))
-        _menu_terms(self._T, self._pi, self._pf, self._pc, *table.la, float(obs.r), float(obs.theta_self),
-                    float(obs.theta_other), m, int(obs.m_other), int(obs.f_other), int(obs.mask_other), out)
+        _menu_terms(self._T, self._pi, self._pf, self._pc, *table.la, *ob, out)
         return out
 
-    def _exact2(self, table: _Table, obs: Observation) -> tuple[int, float]:
-        """Two exact plies + the graph's values at the leaves (``first_ply="exact2"``)."""
-        if self._menu_off[obs.m_self + 1] <= self._menu_off[obs.m_self]:
+    def _exact2(self, table: _Table, ob: tuple) -> tuple[int, float]:
+        """Two exact plies + the graph's values at the leaves (``first_ply="exact2"``; ``ob``: a
+        checked observation)."""
+        r, ts, to, ms, mo, fo, mk = ob
+        if self._menu_off[ms + 1] <= self._menu_off[ms]:
             return -1, 0.0
-        si = np.array([obs.m_self, obs.m_other, obs.f_other, obs.mask_other], dtype=np.int64)
-        sf = np.array([obs.r, obs.theta_self, obs.theta_other], dtype=np.float64)
+        si = np.array([ms, mo, fo, mk], dtype=np.int64)
+        sf = np.array([r, ts, to], dtype=np.float64)
         V_me, V_opp, pref, rw = table.la
         q, j = search(self._T, self._menu_off, self._menu_ids, self._kinds32, table.style_params, pref,
                       float(self.tables.fps), si, sf, 2, float(rw[8]), True, self._max_menu, self._count, True,
                       self._pi, self._pf, self._pc, V_me, V_opp)
         if j < 0:
             return -1, 0.0
-        return int(self._menu_ids[self._menu_off[obs.m_self] + j]), float(q)
+        return int(self._menu_ids[self._menu_off[ms] + j]), float(q)
 
     def act(self, obs: Observation) -> Decision:
-        """The action for one live state (see the module docstring)."""
+        """The action for one live state (see the module docstring). ObservationError (naming the
+        field) for an observation outside the input contract: ids out of range, NaN or infinite
+        numbers, wrong types; no action is answered for those."""
         return self._choose(obs, commit=True)
 
     def peek(self, obs: Observation) -> int:
@@ -538,20 +695,19 @@ class NPCController:
         return int(self._choose(obs, commit=False).action)
 
     def _choose(self, obs: Observation, commit: bool) -> Decision:
+        ob = self._check(obs)
         table = self._table  # one read: a consistent snapshot
-        a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_ea, table.q_me, float(obs.r),
-                                  float(obs.theta_self), float(obs.theta_other), int(obs.m_self), int(obs.m_other),
-                                  int(obs.f_other), int(obs.mask_other))
+        a, s, d, off, e = _decide(self._pi, self._pf, self._pc, table.best_ea, table.q_me, *ob)
         if self.first_ply == "exact2":
-            xa, _ = self._exact2(table, obs)
+            xa, _ = self._exact2(table, ob)
             if xa >= 0:
                 a, e = xa, -1
         elif self.first_ply == "exact" or (off and self.offgraph == "lookahead"):
-            la, _ = self._lookahead(table, obs)
+            la, _ = self._lookahead(table, ob)
             if la >= 0:
                 a, e = la, -1
         elif self.stochastic and s >= 0 and commit:
-            re = self._roulette(table, s, int(obs.m_self))
+            re = self._roulette(table, s, ob[3])
             if re >= 0:
                 e, a = re, int(self._edge_action[re])
         if e >= 0 and self.usage_penalty > 0.0 and commit:
@@ -560,10 +716,9 @@ class NPCController:
 
     def locate(self, obs: Observation) -> tuple[int, float, bool]:
         """The graph state a live state maps to, as act() finds it: (state, normalised distance,
-        off_graph). No decision, no lookahead; state -1 only for an empty graph."""
-        s, d2, _, off = locate_packed(self._pi, self._pf, self._pc, float(obs.r), float(obs.theta_self),
-                                  float(obs.theta_other), int(obs.m_self), int(obs.m_other), int(obs.f_other),
-                                  int(obs.mask_other))
+        off_graph). No decision, no lookahead; state -1 only for an empty graph. ObservationError
+        for an observation outside the input contract."""
+        s, d2, _, off = locate_packed(self._pi, self._pf, self._pc, *self._check(obs))
         return int(s), float(np.sqrt(d2)), bool(off)
 
     def _roulette(self, table: _Table, s: int, m_self: int) -> int:
@@ -583,19 +738,72 @@ class NPCController:
         """Decisions for many NPCs at once (arrays of equal length; deterministic best edges, in
         parallel). Returns (actions, states, off_graph) arrays. ``lookahead=True`` (with
         ``offgraph="lookahead"``) answers off-graph rows with the simulated lookahead, exactly as
-        act() does; the default answers them from the nearest state's table entry."""
-        n = len(r)
-        mask = np.zeros(n, dtype=np.int64) if mask_other is None else np.asarray(mask_other, dtype=np.int64)
+        act() does; the default answers them from the nearest state's table entry. The arrays are
+        checked as act() checks one observation (1-d, equal lengths, real numbers for r and the
+        angles, integer dtypes for the ids; ObservationError naming the field and the first bad row)."""
+        cols = self._check_batch(r, theta_self, theta_other, m_self, m_other, f_other, mask_other)
+        n = len(cols[0])
         out = np.empty((n, 4), dtype=np.int64)
         dist = np.empty(n)
         table = self._table
         kernel = _act_batch if n >= PARALLEL_MIN else _act_batch_serial
         kernel(self._T, self._pi, self._pf, self._pc, table.best_ea, table.q_me, *table.la,
-               bool(lookahead and self.offgraph == "lookahead"), np.asarray(r, dtype=np.float64),
-               np.asarray(theta_self, dtype=np.float64), np.asarray(theta_other, dtype=np.float64),
-               np.asarray(m_self, dtype=np.int64), np.asarray(m_other, dtype=np.int64),
-               np.asarray(f_other, dtype=np.int64), mask, out, dist)
+               bool(lookahead and self.offgraph == "lookahead"), *cols, out, dist)
         return out[:, 0], out[:, 1], out[:, 3].astype(bool)
+
+    def _check_batch(self, r, theta_self, theta_other, m_self, m_other, f_other, mask_other) -> list[np.ndarray]:
+        """The batch arrays as the kernel takes them (float64 x 3, int64 x 4), checked against the
+        input contract (module docstring); ObservationError naming the field and the first bad row."""
+        names = ("r", "theta_self", "theta_other", "m_self", "m_other", "f_other", "mask_other")
+        raw = [r, theta_self, theta_other, m_self, m_other, f_other, mask_other]
+        arrs = []
+        for k, (name, x) in enumerate(zip(names, raw)):
+            if x is None and name == "mask_other":
+                arrs.append(None)
+                continue
+            try:
+                a = np.asarray(x)
+            except (TypeError, ValueError) as e:
+                raise ObservationError(name, f"must be a 1-d array ({e})") from None
+            if a.ndim != 1:
+                raise ObservationError(name, f"must be a 1-d array, got shape {a.shape}")
+            kind = "biuf" if k < 3 else "iu"
+            if a.dtype.kind not in kind or a.dtype.kind == "b":
+                want = "real numbers" if k < 3 else "integers (an integer dtype)"
+                raise ObservationError(name, f"must hold {want}, got dtype {a.dtype}")
+            arrs.append(a)
+        n = len(arrs[0])
+        for name, a in zip(names, arrs):
+            if a is not None and len(a) != n:
+                raise ObservationError(name, f"has {len(a)} rows, r has {n} (the arrays must have equal lengths)")
+        if arrs[6] is None:
+            arrs[6] = np.zeros(n, dtype=np.int64)
+
+        def first_bad(name: str, ok: np.ndarray, problem: str) -> None:
+            if not ok.all():
+                i = int(np.flatnonzero(~ok)[0])
+                raise ObservationError(name, problem, raw_value(name, i), row=i)
+
+        def raw_value(name: str, i: int):
+            v = arrs[names.index(name)][i]
+            return v.item() if hasattr(v, "item") else v
+
+        A = len(self._n_frames)
+        with np.errstate(invalid="ignore"):
+            first_bad("r", (arrs[0] >= 0.0) & (arrs[0] <= MAX_DISTANCE_M),
+                      f"must be a finite distance in [0, {MAX_DISTANCE_M:g}] m")
+            for k in (1, 2):
+                first_bad(names[k], np.abs(arrs[k]) <= MAX_ANGLE_RAD,
+                          f"must be a finite angle within +-{MAX_ANGLE_RAD:g} rad")
+        for k in (3, 4):
+            first_bad(names[k], (arrs[k] >= 0) & (arrs[k] < A), f"must be an action id in [0, {A})")
+        mo = arrs[4].astype(np.int64)
+        first_bad("f_other", (arrs[5] >= 0) & (arrs[5] < self._n_frames[mo]),
+                  "must be a frame of m_other, in [0, frames of m_other)")
+        first_bad("mask_other", (arrs[6] >= 0) & (arrs[6] < self._mask_limit[mo]),
+                  "must hold only the bits of m_other's strikes, in [0, 2 ** strikes of m_other)")
+        return [np.ascontiguousarray(a, dtype=np.float64) for a in arrs[:3]] + \
+               [np.ascontiguousarray(a, dtype=np.int64) for a in arrs[3:]]
 
     def close(self) -> None:
         self._executor.shutdown(wait=True)

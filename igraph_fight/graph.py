@@ -3,8 +3,22 @@
 File (``.igz``): an uncompressed .npz holding the arrays below and ``header`` (JSON bytes):
 format, version, created (UTC timestamp), package version, library fingerprint and summary,
 build options, seed, build report, ``content_hash`` (sha256 over the state, edge and edge-feature
-arrays; no timestamps) and ``checksum`` (sha256 over every array). Written atomically; ``load``
-validates everything and raises GraphFormatError (a LibraryFormatError) with a clear message.
+arrays; no timestamps) and ``checksum``. Written atomically (motion_graph.atomic).
+
+Versions: 2 (written now): ``checksum`` is sha256 over the header's JSON without ``checksum``
+(keys sorted, compact) and every array, so the header is covered too. 1 (read still): sha256
+over every array only. A sha256 anyone can recompute detects corruption, not tampering: what
+makes a file safe to use is that ``load`` also checks every value (``validate``).
+
+``load`` reads without trusting the file and raises GraphFormatError (a LibraryFormatError) whose
+one-line message names the file and the field. Before anything is inflated, the zip and .npy
+headers (motion_graph.library.read_npz): every member's declared size equal to what its .npy
+shape and dtype need, all together no more than the file's size plus 1 MiB, a header of at most
+HEADER_MAX_BYTES. Then the checksum. Then ``validate``: the header's fields and build options
+type- and range-checked (unknown option keys refused), every index array within the arrays it
+indexes, every float finite and in range, and, with the embedded library (validated as
+motion_graph.library.load_library does), every action, frame, mask, Next-set, menu and kind
+consistent with it. A graph that loads is safe for the numba kernels.
 
 Arrays follow docs/contracts.md. States (S,), from the decider's perspective:
 ``state_r`` (m), ``state_theta_self``, ``state_theta_other`` (rad), ``state_m_self`` (a
@@ -21,19 +35,31 @@ import datetime as _dt
 import hashlib
 import io
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from motion_graph.rotations import wrap_angle
 
-from motion_graph.atomic import atomic_write
+from motion_graph.atomic import atomic_write, kill_point
 from motion_graph.errors import LibraryFormatError
 
+if TYPE_CHECKING:
+    from motion_graph.library import ActionLibrary
+
 FORMAT = "igraph-fight/interaction-graph"
-VERSION = 1
+VERSION = 2
+#: versions ``load`` reads (see the module docstring for their checksum rules)
+READABLE_VERSIONS = (1, 2)
+#: the largest JSON header of a graph file, bytes
+HEADER_MAX_BYTES = 4 << 20
+#: states and edges a graph may hold (planner packs 2 * target + swap into an int32)
+MAX_STATES = 1 << 30
+MAX_EDGES = (1 << 31) - 1
 
 STATE_ARRAYS = {
     "state_r": np.float64, "state_theta_self": np.float64, "state_theta_other": np.float64,
@@ -50,14 +76,46 @@ EDGE_ARRAYS = {
     "edge_snap_r": np.float64, "edge_snap_theta": np.float64,
 }
 ALL_ARRAYS = {"state_offsets": np.int64, **STATE_ARRAYS, **EDGE_ARRAYS}
+#: float arrays in [0, 1e6) (distances, durations, counts), angles (rad, within [-pi, pi]) and
+#: damages (within +-1e12); every float array must be finite
+NON_NEGATIVE = ("state_r", "state_snap_r", "state_snap_theta", "feat_duration", "feat_r", "feat_r_mean",
+                "feat_def_self", "feat_def_other", "edge_snap_r", "edge_snap_theta")
+ANGLES = ("state_theta_self", "state_theta_other", "feat_theta_self", "feat_theta_other")
+DAMAGES = ("feat_dmg_given", "feat_dmg_received")
+
+_LENGTH = ("float", 1e-9, 1e6)  # a positive length, angle or duration
+#: Build options a header may record (igraph_fight.build.pipeline.BuildOptions writes them; a
+#: test keeps the two in step): name -> ("int" | "float", min, max), ("bool",), ("choice", values)
+#: or ("sim",) for SIM_OPTIONS. Keys missing from a header take their defaults; others are refused.
+HEADER_OPTIONS: dict[str, tuple] = {
+    "max_samples": ("int", 1, 1 << 40), "min_new_per_round": ("int", 0, 1 << 40), "max_rounds": ("int", 0, 1 << 40),
+    "n_initial": ("int", 1, 1 << 40), "initial_r_min_m": ("float", 0.0, 1e6), "initial_r_max_m": ("float", 0.0, 1e6),
+    "initial_facing_share": ("float", 0.0, 1.0), "initial_facing_deg": ("float", 1e-9, 180.0),
+    "seed_bouts": ("int", 0, 1 << 40), "seed_bout_seconds": _LENGTH, "seed_pairing": ("choice", ("human", "random")),
+    "expand_fraction": ("float", 1e-9, 1.0), "f0": ("int", 1, 1 << 31), "tol_r_m": _LENGTH, "tol_theta_rad": _LENGTH,
+    "link_tol_r_m": _LENGTH, "link_tol_theta_rad": _LENGTH, "dedup_r_m": _LENGTH, "dedup_theta_rad": _LENGTH,
+    "max_distance_m": _LENGTH, "chunk_parents": ("int", 1, 1 << 40), "selection": ("choice", ("round", "parent")),
+    "interaction_weight": ("float", 0.0, 1e9), "prune_dead_ends": ("bool",), "max_candidates": ("int", 1, 1 << 20),
+    "s_r_m": _LENGTH, "s_theta_rad": _LENGTH, "sim": ("sim",),
+}
+#: Simulator options (igraph_fight.sim.SimParams) a header may record, as HEADER_OPTIONS;
+#: ("map", min, max): names -> numbers.
+SIM_OPTIONS: dict[str, tuple] = {
+    "contact_radius_m": ("float", 0.0, 100.0), "target_radius_m": ("map", 0.0, 100.0),
+    "reach_margin_m": ("float", 0.0, 100.0), "min_distance_m": ("float", 0.0, 100.0),
+    "default_damage": ("float", -1e9, 1e9), "damage": ("map", -1e9, 1e9), "max_event_frames": ("int", 1, 10_000_000),
+    "guard_radius_m": ("float", 0.0, 100.0), "guard_lead_s": ("float", 0.0, 100.0),
+}
+#: report fields printed as numbers (`graph info`): a number or null
+REPORT_NUMBERS = ("snap_mean_cm", "snap_max_cm", "snap_mean_deg", "snap_max_deg")
 
 
 class GraphFormatError(LibraryFormatError):
-    """A graph file is missing, truncated, corrupted, of another version or for another library."""
+    """A graph file is missing, truncated, corrupted, of another version, out of range or for another library."""
 
 
-def _hash_arrays(arrays: dict[str, np.ndarray], names) -> str:
-    h = hashlib.sha256()
+def _hash_arrays(arrays: dict[str, np.ndarray], names, h=None) -> str:
+    h = hashlib.sha256() if h is None else h
     for k in sorted(names):
         a = np.ascontiguousarray(arrays[k])
         h.update(k.encode())
@@ -65,6 +123,283 @@ def _hash_arrays(arrays: dict[str, np.ndarray], names) -> str:
         h.update(str(a.shape).encode())
         h.update(memoryview(a).cast("B"))
     return h.hexdigest()
+
+
+def canonical_header(header: dict) -> bytes:
+    """The header's JSON without ``checksum``: keys sorted, compact, ASCII (what version 2 hashes)."""
+    return json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True, separators=(",", ":"),
+                      ensure_ascii=True, allow_nan=False).encode()
+
+
+def graph_checksum(header: dict, arrays: dict[str, np.ndarray], version: int = VERSION) -> str:
+    """The ``checksum`` a graph file of ``version`` records for this header and these arrays:
+    sha256 over canonical_header(header) (version 2 only) and every array (name, dtype, shape, bytes)."""
+    h = hashlib.sha256()
+    if version >= 2:
+        h.update(canonical_header(header))
+    return _hash_arrays(arrays, arrays.keys(), h)
+
+
+def _quote(value) -> str:
+    from motion_graph.library import quote
+    return quote(value)
+
+
+def _number(v) -> bool:
+    """A finite JSON number (not a boolean)."""
+    if isinstance(v, bool):
+        return False
+    return (isinstance(v, float) and math.isfinite(v)) or (isinstance(v, int) and abs(v) < 1 << 1000)
+
+
+def _check_value(name: str, where: str, v, rule: tuple) -> None:
+    """Raise GraphFormatError unless option value ``v`` follows ``rule`` (see HEADER_OPTIONS)."""
+    kind = rule[0]
+    if kind == "int":
+        ok, want = isinstance(v, int) and not isinstance(v, bool) and rule[1] <= v <= rule[2], \
+            f"an integer in [{rule[1]}, {rule[2]}]"
+    elif kind == "float":
+        ok, want = _number(v) and rule[1] <= v <= rule[2], f"a number in [{rule[1]:g}, {rule[2]:g}]"
+    elif kind == "bool":
+        ok, want = isinstance(v, bool), "true or false"
+    elif kind == "choice":
+        ok, want = isinstance(v, str) and v in rule[1], "one of " + ", ".join(rule[1])
+    else:  # map
+        ok = (isinstance(v, dict) and len(v) <= 64
+              and all(isinstance(k, str) and len(k) <= 64 and _number(x) and rule[1] <= x <= rule[2]
+                      for k, x in v.items()))
+        want = f"a map of names to numbers in [{rule[1]:g}, {rule[2]:g}]"
+    if not ok:
+        raise GraphFormatError(name, f"{where}: {_quote(v)} is not {want}")
+
+
+def check_options(options: object, name: str = "<graph>") -> None:
+    """Raise GraphFormatError unless a header's ``options`` are known build options of the right
+    type and range (HEADER_OPTIONS, SIM_OPTIONS) and make a valid SimParams."""
+    if not isinstance(options, dict):
+        raise GraphFormatError(name, "options: not an object")
+    for key, v in options.items():
+        rule = HEADER_OPTIONS.get(key)
+        if rule is None:
+            raise GraphFormatError(name, f"options: unknown key {_quote(key)}")
+        if rule[0] != "sim":
+            _check_value(name, f"options.{key}", v, rule)
+            continue
+        if not isinstance(v, dict):
+            raise GraphFormatError(name, "options.sim: not an object")
+        for k, x in v.items():
+            if k not in SIM_OPTIONS:
+                raise GraphFormatError(name, f"options.sim: unknown key {_quote(k)}")
+            _check_value(name, f"options.sim.{k}", x, SIM_OPTIONS[k])
+        from igraph_fight.sim import SimParams
+        try:
+            SimParams(**v)
+        except (TypeError, ValueError) as e:
+            raise GraphFormatError(name, f"options.sim: {_quote(str(e))[1:-1]}") from None
+    if options.get("initial_r_min_m", 0.0) > options.get("initial_r_max_m", 1e6):
+        raise GraphFormatError(name, "options.initial_r_min_m: larger than initial_r_max_m")
+
+
+def _check_header(header: dict, arrays: dict, name: str) -> None:
+    """Types and ranges of a graph header's fields (each optional: in-memory graphs have few)."""
+    def bad(what: str, problem: str):
+        raise GraphFormatError(name, f"{what}: {problem}")
+
+    if "format" in header and header["format"] != FORMAT:
+        bad("format", f"{_quote(header['format'])} is not {FORMAT!r}")
+    v = header.get("version", VERSION)
+    if isinstance(v, bool) or v not in READABLE_VERSIONS:
+        bad("version", f"graph version {_quote(v)} is not supported")
+    for key in ("created", "package_version", "content_hash", "checksum"):
+        if key in header and not (isinstance(header[key], str) and len(header[key]) <= 200):
+            bad(key, f"{_quote(header[key])} is not a string")
+    if "seed" in header and not (isinstance(header["seed"], int) and not isinstance(header["seed"], bool)
+                                 and abs(header["seed"]) < 1 << 63):
+        bad("seed", f"{_quote(header['seed'])} is not an integer")
+    if "kinds_table" in header:
+        from motion_graph.classify import KINDS
+        if header["kinds_table"] != list(KINDS):
+            bad("kinds_table", f"{_quote(header['kinds_table'])} is not this version's label table; rebuild the graph")
+    lib = header.get("library", {})
+    if not isinstance(lib, dict):
+        bad("library", "not an object")
+    if "fingerprint" in lib and not (isinstance(lib["fingerprint"], str) and len(lib["fingerprint"]) <= 200):
+        bad("library.fingerprint", f"{_quote(lib['fingerprint'])} is not a string")
+    if "n_actions" in lib:
+        _check_value(name, "library.n_actions", lib["n_actions"], ("int", 1, MAX_EDGES))
+    if "fps" in lib:
+        _check_value(name, "library.fps", lib["fps"], ("float", 1e-9, 10_000.0))
+    if "sources" in lib and not (isinstance(lib["sources"], list) and all(isinstance(s, str) for s in lib["sources"])):
+        bad("library.sources", "not a list of strings")
+    if "options" in header:
+        check_options(header["options"], name)
+    rep = header.get("report", {})
+    if not isinstance(rep, dict):
+        bad("report", "not an object")
+    for key in REPORT_NUMBERS:
+        if rep.get(key) is not None and not _number(rep[key]):
+            bad(f"report.{key}", f"{_quote(rep[key])} is not a number")
+    shapes = header.get("shapes", {})
+    if not isinstance(shapes, dict):
+        bad("shapes", "not an object")
+    for key, shape in shapes.items():
+        if key not in arrays or shape != list(np.shape(arrays[key])):
+            bad("shapes", f"{_quote(key)}: {_quote(shape)} is not the shape of an array of the file")
+
+
+def _within(name: str, what: str, x: np.ndarray, lo, hi) -> None:
+    """Raise GraphFormatError unless every x lies in [lo, hi) (bounds: numbers or arrays like x)."""
+    if len(x) == 0:
+        return
+    if np.ndim(lo) == 0 and np.ndim(hi) == 0:
+        if x.min() >= lo and x.max() < hi:
+            return
+    out = (x < lo) | (x >= hi)
+    if out.any():
+        i = int(np.argmax(out))
+        lo_i, hi_i = np.broadcast_to(lo, x.shape)[i], np.broadcast_to(hi, x.shape)[i]
+        raise GraphFormatError(name, f"{what}: {x[i]} at [{i}] is outside [{lo_i}, {hi_i})")
+
+
+def _check_arrays(a: dict, header: dict, name: str) -> None:
+    """Dtypes, lengths and ranges of a graph's arrays, with the number of actions of the header's
+    library when it records one."""
+    from motion_graph.classify import KINDS
+
+    def bad(what: str, problem: str):
+        raise GraphFormatError(name, f"{what}: {problem}")
+
+    missing = [k for k in ALL_ARRAYS if k not in a]
+    if missing:
+        bad("arrays", f"missing {', '.join(missing)}")
+    for k, dt in [*ALL_ARRAYS.items(), *((("library_npz", np.uint8),) if "library_npz" in a else ())]:
+        x = a[k]
+        if not isinstance(x, np.ndarray) or x.dtype != np.dtype(dt) or x.ndim != 1:
+            bad(k, f"dtype {getattr(x, 'dtype', type(x).__name__)} with {np.ndim(x)} dims (expected 1-d {np.dtype(dt)})")
+    S, E = len(a["state_r"]), len(a["edge_target"])
+    if S > MAX_STATES or E > MAX_EDGES:
+        bad("state_r", f"{S} states and {E} edges (at most {MAX_STATES} and {MAX_EDGES})")
+    for k in STATE_ARRAYS:
+        if len(a[k]) != S:
+            bad(k, f"{len(a[k])} values for {S} states")
+    for k in EDGE_ARRAYS:
+        if len(a[k]) != E:
+            bad(k, f"{len(a[k])} values for {E} edges")
+    off = a["state_offsets"]
+    if len(off) != S + 1 or off[0] != 0 or off[-1] != E or np.any(off[1:] < off[:-1]):
+        bad("state_offsets", f"not {S + 1} non-decreasing offsets from 0 to {E}")
+    for k, x in a.items():
+        if k in ALL_ARRAYS and x.dtype.kind == "f" and not np.isfinite(x).all():
+            i = int(np.argmax(~np.isfinite(x)))
+            bad(k, f"{x[i]} at [{i}] is not finite")
+    for k in NON_NEGATIVE:
+        _within(name, k, a[k], 0.0, 1e6)
+    for k in ANGLES:
+        _within(name, k, a[k], -np.pi - 1e-9, np.pi + 1e-9)
+    for k in DAMAGES:
+        _within(name, k, a[k], -1e12, 1e12)
+    _within(name, "edge_target", a["edge_target"], 0, S)
+    _within(name, "edge_swap", a["edge_swap"], 0, 2)
+    n_actions = header.get("library", {}).get("n_actions")
+    A = int(n_actions) if n_actions is not None else 1 << 31
+    for k in ("edge_action", "state_m_self", "state_m_other", "state_nextset"):
+        _within(name, k, a[k], 0, A)
+    _within(name, "state_f_other", a["state_f_other"], 0, 1 << 31)
+    _within(name, "state_mask_other", a["state_mask_other"], 0, 1 << 62)
+    _within(name, "state_size", a["state_size"], 1, 1 << 31)
+    for k in ("feat_kind", "feat_other_kind"):
+        _within(name, k, a[k], 0, len(KINDS))
+
+
+def _check_with_library(a: dict, header: dict, lib, name: str) -> None:
+    """The graph's actions, frames, masks, Next-sets, menus and kinds against its action library."""
+    from igraph_fight.locate import nextset_ids
+    from motion_graph.library import validate_library
+
+    try:
+        validate_library(lib, "library")
+    except LibraryFormatError as e:
+        raise GraphFormatError(name, f"library: {e.problem}") from None
+    A = int(lib.n_actions)
+    hdr = header.get("library", {}).get("n_actions")
+    if hdr is not None and hdr != A:
+        raise GraphFormatError(name, f"library.n_actions: {_quote(hdr)} in the header, the library has {A}")
+    for k in ("edge_action", "state_m_self", "state_m_other"):
+        _within(name, k, a[k], 0, A)
+    m_self, m_other = a["state_m_self"].astype(np.int64), a["state_m_other"].astype(np.int64)
+    _within(name, "state_f_other", a["state_f_other"], 0, np.diff(np.asarray(lib.frame_offsets, np.int64))[m_other])
+    ns = nextset_ids(lib)[m_self]
+    wrong = np.nonzero(a["state_nextset"] != ns)[0]
+    if len(wrong):
+        i = int(wrong[0])
+        raise GraphFormatError(name, f"state_nextset: {a['state_nextset'][i]} at [{i}] is not the Next-set "
+                                     f"{ns[i]} of its action {m_self[i]}")
+    n_strikes = np.minimum(np.diff(np.asarray(lib.strike_offsets, np.int64))[m_other], 62)
+    _within(name, "state_mask_other", a["state_mask_other"], 0, np.left_shift(np.int64(1), n_strikes))
+    deg = np.diff(a["state_offsets"])
+    action = a["edge_action"]
+    if A <= 4096:  # a table of legal (action, next action) pairs
+        legal = np.zeros((A, A), dtype=np.bool_)
+        legal[np.repeat(np.arange(A), np.diff(np.asarray(lib.next_offsets, np.int64))), np.asarray(lib.next_ids)] = True
+        ok = legal[np.repeat(m_self, deg), action]
+    else:  # sorted (action, next action) keys
+        menu = np.unique(np.repeat(np.arange(A, dtype=np.int64), np.diff(np.asarray(lib.next_offsets, np.int64))) * A
+                         + np.asarray(lib.next_ids, np.int64))
+        key = np.repeat(m_self, deg) * A + action
+        ok = menu[np.minimum(np.searchsorted(menu, key), len(menu) - 1)] == key if len(menu) else key < 0
+    if not ok.all():
+        e = int(np.argmin(ok))
+        src = np.repeat(m_self, deg)
+        raise GraphFormatError(name, f"edge_action: {action[e]} at [{e}] is not in the menu of its state's "
+                                     f"action {src[e]}")
+    kinds = np.asarray(lib.kinds, np.int32)
+    for k, want in (("feat_kind", kinds[action]), ("feat_other_kind", np.repeat(kinds[m_other], deg))):
+        if not np.array_equal(a[k], want):
+            e = int(np.argmax(a[k] != want))
+            raise GraphFormatError(name, f"{k}: {a[k][e]} at [{e}] is not the kind {want[e]} of its action")
+
+
+def _check_members(header: dict, members: dict, name: str) -> None:
+    """Format, version and the declared dtypes and shapes of a graph file's members (nothing inflated yet)."""
+    fmt = header.get("format")
+    if fmt != FORMAT:
+        raise GraphFormatError(name, f"not an igraph-fight graph file (format {_quote(fmt)})")
+    v = header.get("version")
+    if isinstance(v, bool) or v not in READABLE_VERSIONS:
+        raise GraphFormatError(name, f"version: graph version {_quote(v)} is not supported (this package reads "
+                                     f"{' and '.join(map(str, READABLE_VERSIONS))}); rebuild it with `igraph-fight build`")
+    missing = [k for k in ALL_ARRAYS if k not in members]
+    if missing:
+        raise GraphFormatError(name, f"arrays: missing {', '.join(missing)}")
+    extra = sorted(set(members) - set(ALL_ARRAYS) - {"header", "library_npz"})
+    if extra:
+        raise GraphFormatError(name, f"arrays: unexpected {_quote(extra[0])}")
+    for k, dt in [*ALL_ARRAYS.items(), *((("library_npz", np.uint8),) if "library_npz" in members else ())]:
+        m = members[k]
+        if m.dtype != np.dtype(dt) or len(m.shape) != 1:
+            raise GraphFormatError(name, f"{k}: dtype {m.dtype} with {len(m.shape)} dims (expected 1-d {np.dtype(dt)})")
+    S, E = members["state_r"].shape[0], members["edge_target"].shape[0]
+    for k in ALL_ARRAYS:
+        n = S + 1 if k == "state_offsets" else S if k in STATE_ARRAYS else E
+        if members[k].shape[0] != n:
+            raise GraphFormatError(name, f"{k}: {members[k].shape[0]} values (expected {n})")
+
+
+def read_graph_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
+    """The header and arrays of a graph file, read boundedly and checksum-verified (no value
+    checks: InteractionGraph.load adds them)."""
+    from motion_graph.library import read_npz
+
+    name = str(path)
+    header, data = read_npz(name, name, "igraph-fight graph file", max_header_bytes=HEADER_MAX_BYTES,
+                            max_inflation=1.0, check=lambda h, m: _check_members(h, m, name), error=GraphFormatError)
+    try:
+        ok = graph_checksum(header, data, header["version"]) == header.get("checksum")
+    except ValueError:  # a header that cannot be hashed canonically
+        ok = False
+    if not ok:
+        raise GraphFormatError(name, "checksum: mismatch, the file is corrupted")
+    return header, data
 
 
 def library_fingerprint(lib) -> str:
@@ -88,6 +423,17 @@ def package_version() -> str:
         return version("igraph-fight")
     except Exception:  # not installed
         return "unknown"
+
+
+def _finite_or_none(v):
+    """A JSON value with every non-finite float replaced by None."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _finite_or_none(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite_or_none(x) for x in v]
+    return v
 
 
 @dataclass
@@ -162,25 +508,56 @@ class InteractionGraph:
         for files that do not record them)."""
         from igraph_fight.sim import SimParams
         opts = self.header.get("options", {}).get("sim")
-        return SimParams(**opts) if opts else SimParams()
+        if not opts:
+            return SimParams()
+        check_options({"sim": opts}, self._name())
+        return SimParams(**opts)
 
-    def load_library(self):
-        """The action library the graph was built from (embedded in the graph file)."""
-        if "library_npz" not in self.arrays:
-            raise GraphFormatError(self.header.get("path", "<graph>"),
-                                   "no embedded action library; pass the library file (--library)")
-        from motion_graph.library import library_from_bytes
-        lib = library_from_bytes(self.arrays["library_npz"].tobytes(), f"{self.header.get('path', '<graph>')}#library")
+    def _name(self) -> str:
+        return str(self.header.get("path", "<graph>"))
+
+    def load_library(self) -> "ActionLibrary":
+        """The action library the graph was built from (embedded in the graph file; validated
+        and parsed once, then the same object)."""
+        lib = self.__dict__.get("_library")
+        if lib is None:
+            if "library_npz" not in self.arrays:
+                raise GraphFormatError(self._name(), "no embedded action library; pass the library file (--library)")
+            from motion_graph.library import library_from_bytes
+            try:
+                lib = library_from_bytes(self.arrays["library_npz"].tobytes(), f"{self._name()}#library")
+            except GraphFormatError:
+                raise
+            except LibraryFormatError as e:
+                raise GraphFormatError(self._name(), f"library_npz: {e.problem}") from None
+            self.__dict__["_library"] = lib
         self.check_library(lib)
         return lib
 
-    def check_library(self, lib) -> None:
-        """Raise GraphFormatError when ``lib`` is not the library this graph was built from."""
+    def check_library(self, lib: "ActionLibrary") -> None:
+        """Raise GraphFormatError when ``lib`` is not the library this graph was built from, or
+        when the graph's arrays do not fit it (``validate(lib)``, run once per library)."""
         fp = library_fingerprint(lib)
         if fp != self.library_fingerprint:
-            raise GraphFormatError(self.header.get("path", "graph"),
+            raise GraphFormatError(self._name(),
                                    f"built from another action library (fingerprint {self.library_fingerprint[:12]}, "
                                    f"given {fp[:12]})")
+        if self.__dict__.get("_validated_for") != fp:
+            self.validate(lib)
+
+    def validate(self, library: "ActionLibrary | None" = None) -> None:
+        """Raise GraphFormatError (naming the field) unless the header's fields and options are of
+        the right type and range and every array is in range: CSR offsets, targets, actions, kinds,
+        finite non-negative distances, angles in [-pi, pi]; with ``library`` (an ActionLibrary),
+        also its number of actions, each state's F_other within its M_other's frames, masks within
+        its strikes, Next-set ids, each edge's action in its state's menu and the kinds. What the
+        numba kernels rely on; ``load`` runs it with the embedded library."""
+        name = self._name()
+        _check_header(self.header, self.arrays, name)
+        _check_arrays(self.arrays, self.header, name)
+        if library is not None:
+            _check_with_library(self.arrays, self.header, library, name)
+            self.__dict__["_validated_for"] = library_fingerprint(library)
 
     def groups(self) -> np.ndarray:
         """Compatible-group id per state (0..G-1, by sorted key)."""
@@ -311,66 +688,49 @@ class InteractionGraph:
 
     # ----- persistence ----------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
-        """Write the graph file atomically (uncompressed .npz with a JSON header)."""
+        """Write the graph file (version 2: uncompressed .npz with a JSON header) atomically,
+        after ``validate()`` (a graph that saves loads)."""
+        self.validate()
         arrays = {k: np.ascontiguousarray(self.arrays[k], dtype=ALL_ARRAYS[k]) for k in ALL_ARRAYS}
         if "library_npz" in self.arrays:
             arrays["library_npz"] = np.ascontiguousarray(self.arrays["library_npz"], dtype=np.uint8)
-        header = {k: v for k, v in self.header.items() if k != "path"}
+        header = {k: v for k, v in self.header.items() if k not in ("path", "checksum")}
         header.update(format=FORMAT, version=VERSION, content_hash=_hash_arrays(arrays, ALL_ARRAYS),
-                      checksum=_hash_arrays(arrays, arrays.keys()),
                       shapes={k: list(v.shape) for k, v in arrays.items()})
         header.setdefault("created", _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
         header.setdefault("package_version", package_version())
+        if "report" in header:
+            header["report"] = _finite_or_none(header["report"])
+        header = json.loads(json.dumps(header, allow_nan=False))  # as load will parse it
+        header["checksum"] = graph_checksum(header, arrays)
+        raw = json.dumps(header).encode()
+        if len(raw) > HEADER_MAX_BYTES:
+            raise ValueError(f"graph header of {len(raw)} bytes (at most {HEADER_MAX_BYTES})")
 
         def write(fh) -> None:
-            np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays)
+            np.savez(fh, header=np.frombuffer(raw, dtype=np.uint8), **arrays)
+            fh.flush()
+            kill_point("write")
 
         atomic_write(path, write)
         self.header = {**header, "path": str(path)}
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "InteractionGraph":
-        """Read and validate a graph file (GraphFormatError on any problem)."""
+        """Read and validate a graph file (GraphFormatError naming the file and the field on any
+        problem; see the module docstring)."""
         path = str(path)
         if not os.path.exists(path):
             raise GraphFormatError(path, "no such file")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except Exception as e:  # BadZipFile, EOFError, ValueError, OSError, CRC errors
-            raise GraphFormatError(path, f"not a readable interaction-graph file (truncated or corrupted?): "
-                                         f"{type(e).__name__}: {e}") from None
-        if "header" not in data:
-            raise GraphFormatError(path, "no header: not an igraph-fight interaction graph")
-        try:
-            header = json.loads(bytes(data.pop("header")).decode())
-        except (UnicodeDecodeError, json.JSONDecodeError):
-            raise GraphFormatError(path, "header is corrupted") from None
-        if not isinstance(header, dict) or header.get("format") != FORMAT:
-            raise GraphFormatError(path, f"not an interaction graph (format {header.get('format')!r})"
-                                   if isinstance(header, dict) else "header is corrupted")
-        if header.get("version") != VERSION:
-            raise GraphFormatError(path, f"graph version {header.get('version')} is not supported "
-                                         f"(expected {VERSION}); rebuild it with `igraph-fight build`")
-        missing = [k for k in ALL_ARRAYS if k not in data]
-        if missing:
-            raise GraphFormatError(path, f"missing arrays: {', '.join(missing)}")
-        for k, dt in ALL_ARRAYS.items():
-            if data[k].dtype != np.dtype(dt) or data[k].ndim != 1:
-                raise GraphFormatError(path, f"array {k} has dtype {data[k].dtype} and {data[k].ndim} dims "
-                                             f"(expected 1-d {np.dtype(dt)})")
-        if _hash_arrays(data, data.keys()) != header.get("checksum"):
-            raise GraphFormatError(path, "checksum mismatch: the file is corrupted")
-        S = len(data["state_r"])
-        E = len(data["edge_target"])
-        bad = [k for k in STATE_ARRAYS if len(data[k]) != S] + [k for k in EDGE_ARRAYS if len(data[k]) != E]
-        off = data["state_offsets"]
-        if bad or len(off) != S + 1 or (S + 1 and (off[0] != 0 or off[-1] != E or np.any(np.diff(off) < 0))):
-            raise GraphFormatError(path, "inconsistent array lengths or CSR offsets")
-        if E and (data["edge_target"].min() < 0 or data["edge_target"].max() >= S):
-            raise GraphFormatError(path, "edge targets out of range")
+        header, data = read_graph_file(path)
         header["path"] = path
-        return cls(data, header)
+        g = cls(data, header)
+        _check_header(header, data, path)  # before the library is parsed with the header's fingerprint
+        if "library_npz" in data:
+            g.load_library()  # validates the library, then the graph against it
+        else:
+            g.validate()
+        return g
 
 
 def load_graph(path: str | os.PathLike) -> InteractionGraph:
@@ -390,6 +750,11 @@ def export_graphml(graph: InteractionGraph, path: str | os.PathLike) -> None:
 
 
 def header_summary(path: str | os.PathLike) -> dict:
-    """The header of a graph file without validating the arrays (for quick listing)."""
-    with np.load(Path(path), allow_pickle=False) as z:
-        return json.loads(bytes(z["header"]).decode())
+    """The header of a graph file without reading the arrays (for quick listing; GraphFormatError
+    when it is no graph file)."""
+    from motion_graph.library import read_npz
+
+    name = str(Path(path))
+    header, _ = read_npz(name, name, "igraph-fight graph file", max_header_bytes=HEADER_MAX_BYTES, max_inflation=1.0,
+                         check=lambda h, m: _check_members(h, m, name), error=GraphFormatError, only=())
+    return header

@@ -27,6 +27,8 @@ class BoutResult:
     hit_events: one dict per hit (t, frame, attacker, victim, kind).
     trace (when recorded): per-frame t (T,), pose (T, 2, 3) pelvis x, z and heading, action and
     frame (T, 2), distance (T,).
+    meta (optional): written as the log's first line, ``{"type": "meta", "t": 0.0, ...}`` (e.g.
+    who played, the initial state a replay starts from: igraph_fight.play).
     """
 
     names: tuple[str, str]
@@ -40,6 +42,7 @@ class BoutResult:
     wall_s: float
     trace: dict | None = None
     notes: list[dict] = field(default_factory=list)
+    meta: dict | None = None
 
     @property
     def score(self) -> float:
@@ -173,6 +176,8 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
     lib = game.library
     paths: dict[str, str] = {}
     lines = []
+    if result.meta is not None:
+        lines.append(json.dumps({"type": "meta", "t": 0.0, **result.meta}))
     for d in result.decisions:
         lines.append(json.dumps({"type": "action", **d}))
     for h in result.hit_events:
@@ -185,7 +190,7 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
         for k in range(0, len(tr["t"]), step):
             lines.append(json.dumps({"type": "distance", "t": round(float(tr["t"][k]), 4),
                                      "distance_m": round(float(tr["distance"][k]), 4)}))
-    lines.sort(key=lambda l: json.loads(l)["t"])
+    lines.sort(key=lambda l: json.loads(l)["t"])  # stable: the meta line stays first
     atomic_write_text(out / "log.jsonl", "\n".join(lines) + "\n")
     paths["log"] = str(out / "log.jsonl")
     if result.trace is not None and plots:
@@ -212,6 +217,52 @@ def write_bout_artifacts(game: FightGame, result: BoutResult, out: str | os.Path
     summary["artifacts"]["summary"] = str(out / "summary.json")
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     return summary["artifacts"]
+
+
+#: bounds of ``read_bout_log``: file size, lines
+MAX_LOG_BYTES = 16 * 1024 * 1024
+MAX_LOG_LINES = 500_000
+
+
+class BoutLogError(ValueError):
+    """A bout log that cannot be read (names the file and the line)."""
+
+
+def read_bout_log(path: str | os.PathLike, max_bytes: int = MAX_LOG_BYTES) -> dict[str, list[dict]]:
+    """The lines of a log.jsonl written by ``write_bout_artifacts``, grouped by type ("meta",
+    "action", "hit", "note", "distance", and any other), each a list in file order. Bounded (at
+    most ``max_bytes`` and MAX_LOG_LINES lines); raises BoutLogError for a missing, oversized or
+    malformed file (a line that is not a JSON object with a string ``type`` and a finite ``t``)."""
+    import math
+
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+    except OSError as e:
+        raise BoutLogError(f"{p}: {e.strerror or e}") from None
+    if size > max_bytes:
+        raise BoutLogError(f"{p}: {size} bytes (at most {max_bytes})")
+    out: dict[str, list[dict]] = {}
+    with open(p, "rb") as fh:
+        data = fh.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise BoutLogError(f"{p}: more than {max_bytes} bytes")
+    lines = data.split(b"\n")
+    if len(lines) > MAX_LOG_LINES + 1:
+        raise BoutLogError(f"{p}: more than {MAX_LOG_LINES} lines")
+    for i, raw in enumerate(lines):
+        if not raw.strip():
+            continue
+        try:
+            d = json.loads(raw.decode("utf-8"), parse_constant=lambda c: float("nan"))
+        except (ValueError, RecursionError) as e:
+            raise BoutLogError(f"{p}:{i + 1}: not JSON ({str(e)[:80]})") from None
+        t = d.get("t") if isinstance(d, dict) else None
+        if (not isinstance(d, dict) or not isinstance(d.get("type"), str) or isinstance(t, bool)
+                or not isinstance(t, (int, float)) or not math.isfinite(t)):
+            raise BoutLogError(f"{p}:{i + 1}: not a log line (an object with a type and a time t)")
+        out.setdefault(d["type"], []).append(d)
+    return out
 
 
 def _plot_bout(result: BoutResult, path: Path, title: str) -> None:

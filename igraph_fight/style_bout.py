@@ -1,6 +1,7 @@
 """Style bouts: two Interaction Graph fighters with given styles, from a graph file to artifacts."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +19,22 @@ def run_style_bout(graph_path: str | Path, style_a: str, style_b: str, depth_a: 
                    first_ply_a: str = "table", first_ply_b: str = "table") -> dict:
     """Play one traced bout and write its artifacts; returns the summary (with ``artifacts``).
 
-    swap_a: (t seconds, style) to switch fighter A's style mid-bout (recomputed in the background).
-    first_ply_a / _b: each fighter's decision rule (NPCController's first_ply: table, exact, exact2).
+    swap_a: (t seconds, style) to switch fighter A's style mid-bout (recomputed in the background),
+    0 <= t < seconds. first_ply_a / _b: each fighter's decision rule (NPCController's first_ply:
+    table, exact, exact2). ValueError for a bout length that is not a finite number > 0, a negative
+    seed or a swap outside the bout; planner.StyleError for a style that does not load (both
+    before anything is computed).
     """
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (math.isfinite(seconds)
+                                                                                   and seconds > 0):
+        raise ValueError(f"seconds must be a finite number > 0, got {seconds!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    if swap_a is not None:
+        from planner import load_style
+        if not (isinstance(swap_a[0], (int, float)) and 0 <= swap_a[0] < seconds):
+            raise ValueError(f"swap_a: the swap time must lie in [0, {seconds:g}) s (the bout), got {swap_a[0]!r}")
+        load_style(swap_a[1])
     graph = load_graph(graph_path)
     if library is not None and not hasattr(library, "n_actions"):
         from motion_graph.library import load_library

@@ -4,8 +4,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from motion_graph.errors import MocapFormatError
-from motion_graph.io_asfamc import load_asf_amc
+from motion_graph.errors import MocapFormatError, check_rate, check_scale
+from motion_graph.io_asfamc import CMU_FPS, find_asf_for, load_amc, load_asf
 from motion_graph.io_bvh import load_bvh
 from motion_graph.motion import Motion
 
@@ -16,21 +16,25 @@ def load_motion(path: str | os.PathLike, fps: float | None = None, metres_per_un
     """Load a .bvh file, or an .amc file with the .asf beside it.
 
     Args:
-        fps: override the frame rate (BVH header / CMU's 120 fps for AMC).
-        metres_per_unit: override the length unit.
+        fps: override the frame rate (BVH header / CMU's 120 fps for AMC); it must be finite and
+            within motion_graph.errors.MIN_FPS..MAX_FPS (0.1..10,000).
+        metres_per_unit: override the length unit (finite, positive).
+    Raises:
+        MocapFormatError: every problem with the file, and a bad fps or metres_per_unit (the
+            error names the file; MocapFormatError is a ValueError).
     """
     p = Path(path)
+    if fps is not None:
+        check_rate(str(p), fps)
+    if metres_per_unit is not None:
+        check_scale(str(p), metres_per_unit)
     if not p.exists():
         raise MocapFormatError(str(p), "no such file")
     suf = p.suffix.lower()
     if suf == ".bvh":
         return load_bvh(p, fps=fps, metres_per_unit=metres_per_unit)
     if suf == ".amc":
-        m = load_asf_amc(p, fps=fps or 120.0)
-        if metres_per_unit is not None:
-            from motion_graph.io_asfamc import load_amc, load_asf, find_asf_for
-            m = load_amc(p, load_asf(find_asf_for(p), metres_per_unit), fps or 120.0)
-        return m
+        return load_amc(p, load_asf(find_asf_for(p), metres_per_unit), CMU_FPS if fps is None else fps)
     raise MocapFormatError(str(p), f"unsupported file type {suf!r} (expected .bvh or .amc)")
 
 

@@ -11,9 +11,13 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import os
+import struct
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable, Collection
 
 import numpy as np
 
@@ -299,8 +303,345 @@ def _checksum(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
+# ----- reading and validating library files (and other .npz files) without trusting them ----------
+#: the most members an .npz file may hold
+NPZ_MAX_MEMBERS = 256
+#: the largest .npy header (the dict after the magic) of a member, bytes (numpy's own limit)
+NPY_MAX_HEADER = 10_000
+#: the largest JSON header of a library file, bytes
+LIBRARY_HEADER_MAX_BYTES = 16 << 20
+#: a library's members may declare at most this many times the file's size in all (plus
+#: NPZ_INFLATION_SLACK); the CMU boxing library inflates 1.6 times
+LIBRARY_MAX_INFLATION = 32.0
+NPZ_INFLATION_SLACK = 1 << 20
+_NPZ_MAX_DIRECTORY = NPZ_MAX_MEMBERS * 512   # bytes of zip central directory
+
+
+@dataclass(frozen=True)
+class NpyMember:
+    """One array of an .npz file as its zip entry and .npy header declare it (nothing inflated)."""
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: np.dtype
+    size: int  # declared uncompressed bytes of the member (the .npy header included)
+
+
+def quote(value: object, limit: int = 80) -> str:
+    """repr(value) cut to ``limit`` characters: how error messages quote what a file holds."""
+    r = repr(value)
+    return r if len(r) <= limit else r[:limit - 3] + "..."
+
+
+def _why(e: BaseException) -> str:
+    return quote(f"{type(e).__name__}: {e}")[1:-1]
+
+
+def _zip_directory_size(fh, size: int) -> int | None:
+    """Bytes of the zip central directory as the end record declares them (None: no end record)."""
+    n = min(size, 22 + 65535)
+    fh.seek(size - n)
+    tail = fh.read(n)
+    i = tail.rfind(b"PK\x05\x06")
+    if i < 0 or len(tail) - i < 22:
+        return None
+    cd = struct.unpack("<I", tail[i + 12:i + 16])[0]
+    j = tail.rfind(b"PK\x06\x06", 0, i)  # zip64 end record
+    if j >= 0 and i - j >= 56:
+        cd = max(cd, struct.unpack("<Q", tail[j + 40:j + 48])[0])
+    return cd
+
+
+def _npy_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, key: str, name: str, error) -> NpyMember:
+    try:
+        with zf.open(info) as f:
+            pre = f.read(10)
+            if len(pre) < 10 or pre[:6] != b"\x93NUMPY":
+                raise error(name, f"{key}: not a .npy array")
+            if pre[6] == 1:
+                start, hlen = 10, struct.unpack("<H", pre[8:10])[0]
+            elif pre[6] == 2:
+                pre += f.read(2)
+                start, hlen = 12, struct.unpack("<I", pre[8:12])[0]
+            else:
+                raise error(name, f"{key}: .npy format version {pre[6]} is not supported")
+            if hlen > NPY_MAX_HEADER:
+                raise error(name, f"{key}: .npy header of {hlen} bytes (at most {NPY_MAX_HEADER})")
+            text = f.read(hlen)
+    except LibraryFormatError:
+        raise
+    except Exception as e:  # BadZipFile, zlib.error, EOFError, OSError ...
+        raise error(name, f"{key}: truncated or corrupted ({_why(e)})") from None
+    if len(text) < hlen:
+        raise error(name, f"{key}: truncated .npy header")
+    read_header = np.lib.format.read_array_header_1_0 if pre[6] == 1 else np.lib.format.read_array_header_2_0
+    try:
+        shape, _, dtype = read_header(io.BytesIO(pre[8:start] + text), max_header_size=NPY_MAX_HEADER)
+    except Exception as e:
+        raise error(name, f"{key}: bad .npy header ({_why(e)})") from None
+    if (dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None or dtype.kind not in "biuf"
+            or not dtype.isnative):
+        raise error(name, f"{key}: dtype {quote(dtype.str)} is not a plain native number or boolean")
+    if any(d < 0 for d in shape):
+        raise error(name, f"{key}: negative shape {quote(shape)}")
+    need = start + hlen + math.prod(shape) * dtype.itemsize
+    if info.file_size != need:
+        raise error(name, f"{key}: its zip entry declares {info.file_size} bytes, its .npy header "
+                          f"{quote(shape)} {dtype} needs {need}")
+    return NpyMember(key, tuple(int(d) for d in shape), dtype, int(info.file_size))
+
+
+def _reject_constant(token: str):
+    raise ValueError(f"{token} is not a number")
+
+
+def _finite_float(token: str) -> float:
+    x = float(token)
+    if not math.isfinite(x):
+        raise ValueError(f"{quote(token)} is not a finite number")
+    return x
+
+
+def _unique_keys(pairs: list) -> dict:
+    d = {}
+    for k, v in pairs:
+        if k in d:
+            raise ValueError(f"duplicate key {quote(k)}")
+        d[k] = v
+    return d
+
+
+def parse_json_header(raw: bytes, name: str, error: type[LibraryFormatError] = LibraryFormatError) -> dict:
+    """A file's JSON header (an object; no NaN, infinities or overflowing numbers, no duplicate
+    keys) or ``error``."""
+    try:
+        header = json.loads(raw.decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float,
+                            object_pairs_hook=_unique_keys)
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
+        raise error(name, f"header: not valid JSON ({_why(e)})") from None
+    if not isinstance(header, dict):
+        raise error(name, "header: not a JSON object")
+    return header
+
+
+def read_npz(src: str | os.PathLike | bytes, name: str, what: str, *, max_header_bytes: int, max_inflation: float,
+             check: Callable[[dict, dict[str, NpyMember]], None] | None = None,
+             error: type[LibraryFormatError] = LibraryFormatError,
+             only: Collection[str] | None = None) -> tuple[dict, dict[str, np.ndarray]]:
+    """The JSON header and the arrays of an .npz file (np.savez), read without trusting it.
+
+    Before anything is inflated: the file must be a zip archive (else "not an <what>") of at most
+    NPZ_MAX_MEMBERS unencrypted ``.npy`` members, stored or deflated, one of them ``header``
+    (uint8 JSON of at most ``max_header_bytes``); each member's declared size must be exactly what
+    its .npy header's shape and dtype need (plain numbers or booleans: nothing to unpickle), and
+    all together at most ``max_inflation`` times the file's size (+ NPZ_INFLATION_SLACK). Then
+    ``check(header, members)`` vets the header and the declared shapes (raising ``error``); only
+    then are the arrays read (``only``: just these), each stopped at its declared size and
+    CRC-checked by zipfile. Any problem: ``error(name, problem)``, a one-line problem.
+    """
+    if isinstance(src, (bytes, bytearray, memoryview)):
+        fh = io.BytesIO(bytes(src))
+    else:
+        try:
+            fh = open(src, "rb")
+        except OSError as e:
+            raise error(name, f"cannot be read ({e.strerror or type(e).__name__})") from None
+    with fh:
+        size = fh.seek(0, 2)
+        fh.seek(0)
+        if fh.read(4) != b"PK\x03\x04":
+            raise error(name, f"not an {what} ({'an empty file' if size == 0 else 'not a zip archive'})")
+        directory = _zip_directory_size(fh, size)
+        if directory is not None and directory > _NPZ_MAX_DIRECTORY:
+            raise error(name, f"zip directory of {directory} bytes (at most {_NPZ_MAX_DIRECTORY})")
+        fh.seek(0)
+        try:
+            zf = zipfile.ZipFile(fh)
+        except Exception as e:  # BadZipFile, EOFError, OSError, ValueError, struct.error ...
+            raise error(name, f"truncated or corrupted ({_why(e)})") from None
+        with zf:
+            infos = zf.infolist()
+            if len(infos) > NPZ_MAX_MEMBERS:
+                raise error(name, f"{len(infos)} zip members (at most {NPZ_MAX_MEMBERS})")
+            keys: dict[str, zipfile.ZipInfo] = {}
+            for info in infos:
+                if not info.filename.endswith(".npy") or info.filename in ("/", ".npy"):
+                    raise error(name, f"unexpected zip member {quote(info.filename)}")
+                key = info.filename[:-4]
+                if key in keys:
+                    raise error(name, f"{quote(key)}: two zip members")
+                if info.flag_bits & 0x1:
+                    raise error(name, f"{quote(key)}: encrypted")
+                if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+                    raise error(name, f"{quote(key)}: compression method {info.compress_type} is not supported")
+                if info.compress_type == zipfile.ZIP_STORED and info.compress_size != info.file_size:
+                    raise error(name, f"{quote(key)}: truncated or corrupted (stored sizes differ)")
+                keys[key] = info
+            if "header" not in keys:
+                raise error(name, f"not an {what} (no header)")
+            total = sum(i.file_size for i in infos)
+            budget = int(max_inflation * size) + NPZ_INFLATION_SLACK
+            if total > budget:
+                raise error(name, f"members declare {total} bytes, more than the {budget} allowed for "
+                                  f"a file of {size}")
+            members = {k: _npy_member(zf, info, k, name, error) for k, info in keys.items()}
+            h = members["header"]
+            if h.dtype != np.uint8 or len(h.shape) != 1:
+                raise error(name, f"header: dtype {h.dtype} with {len(h.shape)} dims (expected 1-d uint8)")
+            if h.shape[0] > max_header_bytes:
+                raise error(name, f"header: {h.shape[0]} bytes of JSON (at most {max_header_bytes})")
+
+            def read(key: str) -> np.ndarray:
+                try:
+                    with zf.open(keys[key]) as f:
+                        return np.lib.format.read_array(f, allow_pickle=False, max_header_size=NPY_MAX_HEADER)
+                except Exception as e:  # BadZipFile (CRC), ValueError (EOF), zlib.error, OSError ...
+                    raise error(name, f"{key}: truncated or corrupted ({_why(e)})") from None
+
+            header = parse_json_header(read("header").tobytes(), name, error)
+            if check is not None:
+                check(header, members)
+            arrays = {k: read(k) for k in keys if k != "header" and (only is None or k in only)}
+    return header, arrays
+
+
+def _check_library_members(header: dict, members: dict[str, NpyMember], name: str) -> None:
+    """Format, version and the declared shapes and dtypes of a library file's members."""
+    if header.get("format") != FORMAT:
+        raise LibraryFormatError(name, f"not an igraph-fight action library (format {quote(header.get('format'))})")
+    if header.get("version") != VERSION:
+        raise LibraryFormatError(name, f"library version {quote(header.get('version'))} is not supported "
+                                       f"(expected {VERSION}); rebuild it")
+    need = set(ActionLibrary._ARRAYS) | {"skel_parents", "skel_offsets", "skel_is_end_site"}
+    missing = sorted(need - set(members))
+    if missing:
+        raise LibraryFormatError(name, f"missing arrays: {', '.join(missing)}")
+    extra = sorted(set(members) - need - {"header", "local_translations"})
+    if extra:
+        raise LibraryFormatError(name, f"unexpected array {quote(extra[0])}")
+    A = members["kinds"].shape[0] if len(members["kinds"].shape) == 1 else -1
+    F = members["rotations"].shape[0] if members["rotations"].shape else -1
+    J = members["skel_parents"].shape[0] if len(members["skel_parents"].shape) == 1 else -1
+    S = members["strike_joint"].shape[0] if len(members["strike_joint"].shape) == 1 else -1
+    E = members["next_ids"].shape[0] if len(members["next_ids"].shape) == 1 else -1
+    shapes = {
+        "kinds": (A,), "src_start": (A,), "src_end": (A,), "src_fps": (A,), "src_placement": (A, 3),
+        "frame_offsets": (A + 1,), "rotations": (F, J, 4), "root_positions": (F, 3), "path": (F, 3),
+        "local_translations": (F, J, 3), "dx": (A,), "dz": (A,), "dheading": (A,), "strike_offsets": (A + 1,),
+        "strike_joint": (S,), "strike_kind": (S,), "strike_w0": (S,), "strike_w1": (S,), "strike_peak": (S,),
+        "strike_reach": (S,), "defence_w0": (A,), "defence_w1": (A,), "next_offsets": (A + 1,),
+        "next_ids": (E,), "next_cost": (E,), "skel_parents": (J,), "skel_offsets": (J, 3), "skel_is_end_site": (J,),
+    }
+    floats = {"src_fps", "src_placement", "rotations", "root_positions", "path", "local_translations", "dx", "dz",
+              "dheading", "strike_reach", "next_cost", "skel_offsets"}
+    for k, m in members.items():
+        if k == "header":
+            continue
+        kinds = "b" if k == "skel_is_end_site" else "f" if k in floats else "iu"
+        if m.dtype.kind not in kinds or m.shape != shapes[k]:
+            raise LibraryFormatError(name, f"{k}: shape {m.shape} {m.dtype} (expected {shapes[k]} of "
+                                           f"{'bool' if kinds == 'b' else 'floats' if kinds == 'f' else 'ints'})")
+    if A < 1 or J < 1:
+        raise LibraryFormatError(name, "kinds, skel_parents: no actions or no joints")
+
+
+def _library_fields(header: dict, name: str, A: int, J: int) -> None:
+    """Types and ranges of a library header's fields."""
+    def bad(what: str, problem: str):
+        raise LibraryFormatError(name, f"{what}: {problem}")
+
+    fps = header.get("fps")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not 0 < fps <= 10_000:
+        bad("fps", f"{quote(fps)} is not a frame rate in (0, 10000]")
+    for key in ("labels", "sources"):
+        v = header.get(key)
+        if not isinstance(v, list) or len(v) != A or not all(isinstance(s, str) for s in v):
+            bad(key, f"not a list of {A} strings")
+    bad_labels = [s for s in header["labels"] if s not in KINDS]
+    if bad_labels:
+        bad("labels", f"unknown label {quote(bad_labels[0])}")
+    if list(header.get("kinds_table") or []) != list(KINDS):
+        bad("kinds_table", "the label table differs from this version's; rebuild the library")
+    parts = header.get("parts")
+    if not isinstance(parts, dict) or not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v < J
+                                              for v in parts.values()):
+        bad("parts", f"not a map of part names to joints in [0, {J})")
+    sk = header.get("skeleton")
+    if not isinstance(sk, dict):
+        bad("skeleton", "not an object")
+    names, channels, mpu = sk.get("names"), sk.get("channels"), sk.get("metres_per_unit")
+    if not isinstance(names, list) or len(names) != J or not all(isinstance(s, str) for s in names):
+        bad("skeleton.names", f"not a list of {J} strings")
+    if (not isinstance(channels, list) or len(channels) != J
+            or not all(isinstance(c, list) and all(isinstance(s, str) for s in c) for c in channels)):
+        bad("skeleton.channels", f"not a list of {J} lists of strings")
+    if isinstance(mpu, bool) or not isinstance(mpu, (int, float)) or not 0 < mpu < 1e6:
+        bad("skeleton.metres_per_unit", f"{quote(mpu)} is not a positive scale")
+    if not isinstance(header.get("meta", {}), dict):
+        bad("meta", "not an object")
+
+
+def _check_library_arrays(d: dict[str, np.ndarray], labels: list[str], name: str) -> None:
+    """Ranges of a library's arrays: CSR offsets, indices, frame windows, finite values."""
+    def bad(what: str, problem: str):
+        raise LibraryFormatError(name, f"{what}: {problem}")
+
+    def within(what: str, x: np.ndarray, lo, hi) -> None:  # every x in [lo, hi) (bounds may be arrays)
+        x = np.asarray(x).reshape(-1)
+        out = (x < lo) | (x >= hi)
+        if out.any():
+            i = int(np.argmax(out))
+            lo_i, hi_i = np.broadcast_to(lo, x.shape)[i], np.broadcast_to(hi, x.shape)[i]
+            bad(what, f"{x[i]} at [{i}] is outside [{lo_i}, {hi_i})")
+
+    def offsets(what: str, off: np.ndarray, total: int, min_step: int = 0) -> None:
+        off = off.astype(np.int64)
+        if off[0] != 0 or off[-1] != total or np.any(np.diff(off) < min_step):
+            bad(what, f"not offsets from 0 to {total} in steps of at least {min_step}")
+
+    for k, v in d.items():
+        if v.dtype.kind == "f" and not np.isfinite(v).all():
+            i = int(np.argmax(~np.isfinite(v).reshape(-1)))
+            bad(k, f"{v.reshape(-1)[i]} at [{i}] is not finite")
+    A, F, J = len(d["kinds"]), len(d["rotations"]), len(d["skel_parents"])
+    if len(labels) != A:
+        bad("labels", f"{len(labels)} labels for {A} actions")
+    norm = np.linalg.norm(d["rotations"], axis=-1).reshape(-1)
+    off_unit = np.abs(norm - 1.0) > 0.01
+    if off_unit.any():
+        i = int(np.argmax(off_unit))
+        bad("rotations", f"quaternion {i} has norm {norm[i]:.6g}, not 1")
+    offsets("frame_offsets", d["frame_offsets"], F, 2)
+    offsets("strike_offsets", d["strike_offsets"], len(d["strike_joint"]))
+    offsets("next_offsets", d["next_offsets"], len(d["next_ids"]))
+    within("next_ids", d["next_ids"], 0, A)
+    within("kinds", d["kinds"], 0, len(KINDS))
+    wrong = np.nonzero(d["kinds"] != np.array([KINDS.index(s) if s in KINDS else -1 for s in labels]))[0]
+    if len(wrong):
+        bad("kinds", f"{d['kinds'][wrong[0]]} at [{wrong[0]}] is not the kind of its label {quote(labels[wrong[0]])}")
+    within("strike_joint", d["strike_joint"], 0, J)
+    within("strike_kind", d["strike_kind"], 0, len(KINDS))
+    n = np.diff(d["frame_offsets"].astype(np.int64))
+    n_of = np.repeat(n, np.diff(d["strike_offsets"].astype(np.int64)))
+    w0, w1 = d["strike_w0"].astype(np.int64), d["strike_w1"].astype(np.int64)
+    within("strike_w0", w0, 0, n_of)
+    within("strike_w1", w1, w0 + 1, n_of + 1)  # w0 < w1 <= frames of the action
+    within("strike_peak", d["strike_peak"], 0, n_of)
+    d0, d1 = d["defence_w0"].astype(np.int64), d["defence_w1"].astype(np.int64)
+    none = d0 < 0
+    if np.any(d0 < -1) or np.any(none & (d1 != -1)) or np.any(~none & (d1 <= d0)):
+        bad("defence_w0", "defence windows must be -1, -1 or 0 <= w0 < w1")
+    within("strike_reach", d["strike_reach"], 0, np.inf)
+    within("next_cost", d["next_cost"], 0, np.inf)
+    within("src_fps", d["src_fps"], 1e-9, np.inf)
+    p = d["skel_parents"].astype(np.int64)
+    if p[0] != -1 or np.any(p[1:] < -1) or np.any(p[1:] >= np.arange(1, J)):
+        bad("skel_parents", "not parent indices with the root first and parents before children")
+
+
 def load_library(path: str | os.PathLike) -> ActionLibrary:
-    """Read and validate a library file (LibraryFormatError on any problem)."""
+    """Read and validate a library file (LibraryFormatError on any problem): bounded reading
+    (``read_npz``), checksum, and every header field and array range-checked."""
     path = str(path)
     if not os.path.exists(path):
         raise LibraryFormatError(path, "no such file")
@@ -308,46 +649,39 @@ def load_library(path: str | os.PathLike) -> ActionLibrary:
 
 
 def library_from_bytes(data: bytes, name: str = "<embedded library>") -> ActionLibrary:
-    """A library from the bytes of a library file (e.g. embedded in a graph file)."""
-    return _load_library(io.BytesIO(data), name)
+    """A library from the bytes of a library file (e.g. embedded in a graph file), validated as
+    ``load_library`` does."""
+    return _load_library(bytes(data), name)
 
 
-def _load_library(src, path: str) -> ActionLibrary:
-    try:
-        with np.load(src, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except Exception as e:  # zipfile.BadZipFile, EOFError, ValueError, OSError ...
-        raise LibraryFormatError(path, f"not a readable action-library file (truncated or corrupted?): {e}") from None
-    if "header" not in data:
-        raise LibraryFormatError(path, "no header: not an igraph-fight action library")
-    try:
-        header = json.loads(bytes(data.pop("header")).decode())
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise LibraryFormatError(path, "header is corrupted") from None
-    if header.get("format") != FORMAT:
-        raise LibraryFormatError(path, f"not an action library (format {header.get('format')!r})")
-    if header.get("version") != VERSION:
-        raise LibraryFormatError(path, f"library version {header.get('version')} is not supported (expected {VERSION}); rebuild it")
-    missing = [k for k in ActionLibrary._ARRAYS + ("skel_parents", "skel_offsets", "skel_is_end_site") if k not in data]
-    if missing:
-        raise LibraryFormatError(path, f"missing arrays: {', '.join(missing)}")
+def _load_library(src: str | bytes, path: str) -> ActionLibrary:
+    header, data = read_npz(src, path, "igraph-fight action library", max_header_bytes=LIBRARY_HEADER_MAX_BYTES,
+                            max_inflation=LIBRARY_MAX_INFLATION,
+                            check=lambda h, m: _check_library_members(h, m, path))
     if _checksum(data) != header.get("checksum"):
         raise LibraryFormatError(path, "checksum mismatch: the file is corrupted")
-    if list(header.get("kinds_table", [])) != list(KINDS):
-        raise LibraryFormatError(path, "the label table differs from this version's; rebuild the library")
+    A, J = len(data["kinds"]), len(data["skel_parents"])
+    _library_fields(header, path, A, J)
+    _check_library_arrays(data, header["labels"], path)
     s = header["skeleton"]
-    sk = Skeleton(tuple(s["names"]), data.pop("skel_parents"), data.pop("skel_offsets"),
-                  tuple(tuple(c) for c in s["channels"]), data.pop("skel_is_end_site"), float(s["metres_per_unit"]))
-    lt = data.pop("local_translations", None)
-    lib = ActionLibrary(skeleton=sk, fps=float(header["fps"]), parts={k: int(v) for k, v in header["parts"].items()},
-                        labels=list(header["labels"]), sources=list(header["sources"]), local_translations=lt,
-                        meta=header.get("meta", {}), **{k: data[k] for k in ActionLibrary._ARRAYS})
-    A = lib.n_actions
-    if len(lib.frame_offsets) != A + 1 or lib.frame_offsets[-1] != len(lib.rotations):
-        raise LibraryFormatError(path, "inconsistent frame offsets")
-    if len(lib.next_offsets) != A + 1 or (len(lib.next_ids) and lib.next_ids.max() >= A):
-        raise LibraryFormatError(path, "inconsistent transition table")
-    return lib
+    try:  # everything was checked above; a ValueError here would still be the file's
+        sk = Skeleton(tuple(s["names"]), data.pop("skel_parents"), data.pop("skel_offsets"),
+                      tuple(tuple(c) for c in s["channels"]), data.pop("skel_is_end_site"), float(s["metres_per_unit"]))
+        lt = data.pop("local_translations", None)
+        return ActionLibrary(skeleton=sk, fps=float(header["fps"]), parts={k: int(v) for k, v in header["parts"].items()},
+                             labels=list(header["labels"]), sources=list(header["sources"]), local_translations=lt,
+                             meta=header.get("meta", {}), **{k: data[k] for k in ActionLibrary._ARRAYS})
+    except ValueError as e:
+        raise LibraryFormatError(path, f"arrays: {_why(e)}") from None
+
+
+def validate_library(lib: ActionLibrary, name: str = "<library>") -> None:
+    """Raise LibraryFormatError unless an ActionLibrary's arrays are in range (what load_library checks)."""
+    d = {k: np.asarray(getattr(lib, k)) for k in ActionLibrary._ARRAYS}
+    d.update(skel_parents=np.asarray(lib.skeleton.parents), skel_offsets=np.asarray(lib.skeleton.offsets))
+    if lib.local_translations is not None:
+        d["local_translations"] = np.asarray(lib.local_translations)
+    _check_library_arrays(d, list(lib.labels), name)
 
 
 # ----- building ----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import os
 import re
 from pathlib import Path
 
-from motion_graph.errors import MocapFormatError
+from motion_graph.errors import MocapFormatError, shorten
 from motion_graph.skeleton import Skeleton
 
 PARTS = ("pelvis", "belly", "chest", "neck", "head", "head_top",
@@ -85,6 +85,9 @@ def resolve_parts(skeleton: Skeleton, overrides: dict[str, str] | None = None) -
     return out
 
 
+#: Most characters of the joint list require_parts' message shows.
+JOINT_LIST_CHARS = 400
+
 #: Parts every pipeline stage needs.
 REQUIRED_PARTS = ("pelvis", "chest", "head", "l_shoulder", "r_shoulder", "l_fist", "r_fist",
                   "l_ankle", "r_ankle", "l_toe", "r_toe", "l_hip", "r_hip")
@@ -105,5 +108,6 @@ def require_parts(skeleton: Skeleton, parts: dict[str, int], source: str) -> Non
     """Raise a clear error listing semantic parts that could not be found."""
     missing = [p for p in REQUIRED_PARTS if p not in parts]
     if missing:
+        joints = shorten(", ".join(skeleton.names), JOINT_LIST_CHARS)
         raise MocapFormatError(source, f"cannot find joints for {', '.join(missing)}; give a joint-map override "
-                                       f"file (JSON {{\"part\": \"JointName\"}}). Joints: {', '.join(skeleton.names)}")
+                                       f"file (JSON {{\"part\": \"JointName\"}}). Joints ({skeleton.n_joints}): {joints}")

@@ -236,14 +236,20 @@ def load_style(path_or_name: str | Path) -> Style:
             message names the file and the field.
     """
     s = str(path_or_name)
+    presets = ", ".join(list_presets())
+    if not s.strip():
+        raise StyleError("<style>", None, f"empty style name: give a preset ({presets}) or a .toml/.json style file")
     p = Path(s)
-    if not p.suffix and not p.exists():
+    path_like = "/" in s or p.suffix.lower() in (".toml", ".json")
+    if not path_like and not p.suffix and not p.exists():
         if s not in list_presets():
-            raise StyleError(s, None, f"no such preset (presets: {', '.join(list_presets())}) and no such file")
+            raise StyleError(s, None, f"unknown style: not a preset ({presets}) nor a .toml/.json style file")
         with resources.as_file(resources.files(_PRESET_PACKAGE) / f"{s}.toml") as pp:
             return style_from_dict(_load_raw(Path(pp), f"preset {s!r}", ()), f"preset {s!r}")
     if not p.is_file():
-        raise StyleError(s, None, "no such file")
+        if path_like:
+            raise StyleError(s, None, f"no such file (a style file path was given; presets: {presets})")
+        raise StyleError(s, None, f"unknown style: not a preset ({presets}) nor a .toml/.json style file")
     return style_from_dict(_load_raw(p, s, (str(p.resolve()),)), s)
 
 

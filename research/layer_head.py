@@ -237,12 +237,10 @@ def fit(cfg: HeadConfig, norm: RunningNorm, obs: np.ndarray, label: np.ndarray, 
 # 3. rounds
 def save_head(out: str, cfg: HeadConfig, state: dict, history: list) -> None:
     """A copy of the base checkpoint with ``layer_head`` added (atomic)."""
-    from motion_graph.atomic import atomic_write
-
-    from tracker.track.policy_net import load_checkpoint
+    from tracker.track.policy_net import load_checkpoint, save_policy_checkpoint
     ck = load_checkpoint(cfg.base_ckpt)
     ck["layer_head"] = dict(state=state, config=asdict(cfg), history=history)
-    atomic_write(out, lambda fh: torch.save(ck, fh))
+    save_policy_checkpoint(out, ck)
 
 
 def load_head_policy(path):

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,10 +42,13 @@ def _state_obs(a, s) -> Observation:
 
 def _observations(graph, lib, n=600, seed=0) -> list[Observation]:
     """Graph states, perturbed graph states, states with another frame / menu / opponent action,
-    and random live states (r up to 5 m, any angles)."""
+    and random live states (r up to 5 m, any angles); all within the controller's input contract
+    (frames of the opponent's action, bits of its strikes)."""
     a = graph.arrays
     rng = np.random.default_rng(seed)
     S, A = graph.n_states, lib.n_actions
+    nf = np.diff(lib.frame_offsets)
+    bits = np.diff(lib.strike_offsets)
     out = []
     for i in range(n):
         s = int(rng.integers(S))
@@ -54,7 +58,7 @@ def _observations(graph, lib, n=600, seed=0) -> list[Observation]:
             o = o._replace(r=o.r + rng.normal(0, 0.08), theta_self=o.theta_self + rng.normal(0, 0.2),
                            theta_other=o.theta_other + rng.normal(0, 0.2))
         elif kind == 2:
-            o = o._replace(f_other=max(0, o.f_other + int(rng.integers(-25, 26))), r=o.r + rng.normal(0, 0.3))
+            o = o._replace(f_other=max(0, o.f_other + int(rng.integers(-25, 26))), r=abs(o.r + rng.normal(0, 0.3)))
         elif kind == 3:
             o = o._replace(m_self=int(rng.integers(A)), m_other=int(rng.integers(A)),
                            mask_other=int(rng.integers(0, 3)))
@@ -62,6 +66,8 @@ def _observations(graph, lib, n=600, seed=0) -> list[Observation]:
             o = Observation(float(rng.uniform(0.3, 5.0)), float(rng.uniform(-np.pi, np.pi)),
                             float(rng.uniform(-np.pi, np.pi)), int(rng.integers(A)), int(rng.integers(A)),
                             int(rng.integers(0, 70)), 0)
+        o = o._replace(f_other=min(o.f_other, int(nf[o.m_other]) - 1),
+                       mask_other=o.mask_other & ((1 << int(bits[o.m_other])) - 1))
         out.append(o)
     return out
 
@@ -347,3 +353,279 @@ def test_exact2_searches_two_exact_plies_over_the_graph_values(graph_lib):
     with pytest.raises(ValueError, match="first_ply"):
         NPCController(g, lib, first_ply="exact3")
     c.close()
+
+
+# ----- the input contract ---------------------------------------------------------------------------
+#: the fields of an Observation, in order
+FIELDS = Observation._fields
+
+
+def invalid_cases(n_frames, n_strikes, seed: int = 0, n_scalar: int = 420, n_batch: int = 120) -> list[tuple]:
+    """Observations and batches outside the controller's input contract, from a fixed-seed
+    generator: (entry point, first_ply, payload, field the error must name, row or None).
+    Scalar payloads are 7-tuples (one field corrupted: ids out of range, non-finite or negative
+    numbers, wrong types); batch payloads are 7 lists/arrays (one row corrupted, mismatched
+    lengths, 2-d arrays, non-integer ids, object arrays). Entry points: act, peek, locate,
+    menu_terms (scalar), act_batch and act_batch+lookahead (batch)."""
+    rng = np.random.default_rng(seed)
+    nf = [int(x) for x in n_frames]
+    A = len(nf)
+    lim = [1 << int(k) for k in n_strikes]
+    big = [2 ** 31, 2 ** 32, 2 ** 40, 2 ** 62, 2 ** 63 - 1, -2 ** 31, -2 ** 63]
+
+    def valid(r=None):
+        mo = int(rng.integers(A))
+        return [float(rng.uniform(0.2, 4.0)) if r is None else r, float(rng.uniform(-np.pi, np.pi)),
+                float(rng.uniform(-np.pi, np.pi)), int(rng.integers(A)), mo, int(rng.integers(nf[mo])),
+                int(rng.integers(lim[mo]))]
+
+    def bad_value(field: str, o: list):
+        k = int(rng.integers(8))
+        if field in ("m_self", "m_other"):
+            return [-1, A, A + 1, A + int(rng.integers(1, 1000)), *big][int(rng.integers(4 + len(big)))] if k < 6 \
+                else [3.0, "3", None, True, 2.5 + 0j][int(rng.integers(5))]
+        if field == "f_other":
+            n = nf[o[4]]
+            return [-1, n, n + 1, n + int(rng.integers(1, 100)), *big][int(rng.integers(4 + len(big)))] if k < 6 \
+                else [1.0, "1", None, False][int(rng.integers(4))]
+        if field == "mask_other":
+            m = lim[o[4]]
+            return [-1, m, m + 1, 2 ** 40, 2 ** 63 - 1, -2 ** 63][int(rng.integers(6))] if k < 6 else \
+                [0.0, "0", None][int(rng.integers(3))]
+        if field == "r":
+            return [np.nan, np.inf, -np.inf, -0.1, -1e-9, -1e300, 1e300, 1e7, "1.0", None, 1j, 10 ** 400][
+                int(rng.integers(12))]
+        return [np.nan, np.inf, -np.inf, 1e300, -1e300, 1e7, "0.1", None, [0.1]][int(rng.integers(9))]
+
+    cases = []
+    entries = ("act", "act", "act", "peek", "locate", "menu_terms")
+    plies = ("table", "exact", "exact2")
+    for i in range(n_scalar):
+        o = valid()
+        field = FIELDS[i % 7]
+        o[i % 7] = bad_value(field, o)
+        cases.append((entries[int(rng.integers(len(entries)))], plies[(i // 7) % 3], tuple(o), field, None))
+    for i in range(n_batch):
+        n = int(rng.integers(1, 40))
+        rows = [valid() for _ in range(n)]
+        cols = [np.array([rw[k] for rw in rows]) for k in range(7)]
+        entry = ("act_batch", "act_batch+lookahead")[i % 2]
+        kind = i % 6
+        k = int(rng.integers(7))
+        field, row = FIELDS[k], None
+        if kind in (0, 1, 2):         # one bad row: a number out of range, NaN or infinite
+            row = int(rng.integers(n))
+            v = bad_value(field, rows[row])
+            fits = ((lambda x: type(x) is float or (type(x) is int and abs(x) < 1e300)) if k < 3
+                    else (lambda x: type(x) is int and -2 ** 63 <= x < 2 ** 63))
+            while not fits(v):
+                v = bad_value(field, rows[row])
+            cols[k][row] = v
+        elif kind == 3:               # mismatched lengths
+            k = max(k, 1)
+            field = FIELDS[k]
+            cols[k] = np.concatenate([cols[k], cols[k][:1]]) if rng.random() < 0.5 or n == 1 else cols[k][:-1]
+        elif kind == 4:               # 2-d
+            cols[k] = np.stack([cols[k], cols[k]], axis=1)
+        else:                         # wrong dtype: float ids, object or string arrays, bools
+            if k >= 3:
+                cols[k] = cols[k].astype(np.float64) + (0.5 if rng.random() < 0.5 else 0.0)
+            else:
+                cols[k] = cols[k].astype(str) if rng.random() < 0.5 else np.array([None] * n, dtype=object)
+        cases.append((entry, "table", cols, field, row))
+    return cases
+
+
+def run_case(ctrls: dict, case: tuple):
+    """Run one invalid case on ``ctrls`` (first_ply -> NPCController); returns what came back."""
+    entry, ply, payload, _, _ = case
+    c = ctrls[ply]
+    if entry.startswith("act_batch"):
+        return c.act_batch(*payload, lookahead=entry.endswith("lookahead"))
+    obs = Observation(*payload)
+    return getattr(c, entry)(obs)
+
+
+@pytest.fixture(scope="module")
+def contract_ctrls(graph_lib):
+    g, lib = graph_lib
+    cs = {p: NPCController(g, lib, style="balanced", depth=2, first_ply=p) for p in ("table", "exact", "exact2")}
+    yield cs
+    for c in cs.values():
+        c.close()
+
+
+def test_every_invalid_observation_raises_an_observation_error(contract_ctrls, graph_lib):
+    """Acceptance: 540 invalid observations and batches (fixed seed), every entry point: each
+    raises ObservationError naming the corrupted field (and row), none crashes or answers. On the
+    code before the contract (demo graph), 60 of these 540 cases killed the process, 386 answered
+    an action and 94 raised assorted errors (``python tests/test_controller.py --old-code DIR``
+    replays them on another source tree, restarting after each crash)."""
+    from igraph_fight.controller import ObservationError
+    _, lib = graph_lib
+    cases = invalid_cases(np.diff(lib.frame_offsets), np.diff(lib.strike_offsets))
+    assert len(cases) >= 500
+    raised = 0
+    for case in cases:
+        with pytest.raises(ObservationError) as e:
+            run_case(contract_ctrls, case)
+        assert e.value.field == case[3], (case, e.value)
+        if case[4] is not None:
+            assert e.value.row == case[4], (case, e.value)
+        assert str(e.value).startswith(f"observation {case[3]}") and "\n" not in str(e.value)
+        raised += 1
+    assert raised == len(cases)
+    # the controllers still answer valid observations afterwards
+    o = Observation(1.2, 0.1, -0.2, 0, 0, 0, 0)
+    assert all(int(c.act(o).action) in set(int(x) for x in lib.next(0)) for c in contract_ctrls.values())
+
+
+def test_observation_checks_accept_numpy_scalars_and_keep_answers(contract_ctrls, graph_lib):
+    """numpy scalars are valid field values (converted exactly); boundary values are accepted."""
+    g, lib = graph_lib
+    c = contract_ctrls["table"]
+    obs = _observations(g, lib, 50, seed=9)
+    for o in obs:
+        n = Observation(np.float64(o.r), np.float32(o.theta_self).item(), np.float64(o.theta_other), np.int64(o.m_self),
+                        np.int32(o.m_other), np.int64(o.f_other), np.int64(o.mask_other))
+        assert c.act(n) == c.act(o._replace(theta_self=float(np.float32(o.theta_self))))
+    nf = np.diff(lib.frame_offsets)
+    edge = Observation(0.0, -np.pi, np.pi, lib.n_actions - 1, 0, int(nf[0]) - 1, 0)
+    c.act(edge)
+    c.act(edge._replace(r=1e6, theta_self=1e6, theta_other=-1e6))
+
+
+def test_set_style_and_set_depth_interleaved_lose_no_update(graph_lib):
+    """Interleaved requests end with the last requested style and the last requested depth,
+    whatever order the worker finishes them in; every future's table holds its request."""
+    g, lib = graph_lib
+    c = NPCController(g, lib, style="balanced", depth=1, offgraph="nearest")
+    futs = [c.set_style("outboxer"), c.set_depth(3), c.set_style("infighter"), c.set_depth(2)]
+    futs[-1].result()
+    assert (c.style, c.depth) == ("infighter", 2)
+    assert futs[0].result().style in ("outboxer", "infighter") and futs[1].result().depth in (3, 2)
+    c.set_depth(4)
+    c.set_style("outboxer", wait=True)
+    assert (c.style, c.depth) == ("outboxer", 4)
+    ref = NPCController(g, lib, style="outboxer", depth=4, offgraph="nearest")
+    assert np.array_equal(c.policy.best_me, ref.policy.best_me)
+    # a gamma given at construction survives the swaps
+    cg = NPCController(g, lib, style="balanced", depth=2, gamma=0.8, offgraph="nearest")
+    cg.set_style("infighter", wait=True)
+    assert cg.policy.gamma == pytest.approx(0.8)
+    for x in (c, ref, cg):
+        x.close()
+
+
+def test_depth_and_gamma_are_bounded(graph_lib):
+    from igraph_fight.controller import MAX_DEPTH
+    g, lib = graph_lib
+    c = NPCController(g, lib, style="balanced", depth=1, offgraph="nearest")
+    for bad in (0, -2, MAX_DEPTH + 1, 10 ** 6, 2.0, True, "3", None):
+        with pytest.raises(ValueError, match="depth must be an integer"):
+            c.set_depth(bad)
+        with pytest.raises(ValueError, match="depth must be an integer"):
+            NPCController(g, lib, depth=bad)
+    for bad in (np.nan, np.inf, 0.0, -1.0, 5.0, 1.0000001, "0.5", True):
+        with pytest.raises(ValueError, match="gamma must be a finite number"):
+            NPCController(g, lib, depth=1, gamma=bad)
+    assert c.depth == 1
+    c.close()
+
+
+def _replay_on_old_code(src: str, graph: str, out: str | None) -> dict:
+    """Each invalid case on the controller of another source tree, in subprocesses (one restart
+    per crash): counts of crashes (killed by a signal), exceptions and silent answers."""
+    import json
+    import subprocess
+    import sys
+
+    code = r'''
+import sys, json, numpy as np
+sys.path.insert(0, sys.argv[1]); sys.path.insert(1, sys.argv[4])
+from test_controller import invalid_cases, run_case
+from igraph_fight.controller import NPCController
+from igraph_fight.graph import load_graph
+g = load_graph(sys.argv[2]); lib = g.load_library()
+cs = {p: NPCController(g, lib, style="balanced", depth=2, first_ply=p) for p in ("table", "exact", "exact2")}
+cases = invalid_cases(np.diff(lib.frame_offsets), np.diff(lib.strike_offsets))
+for i in range(int(sys.argv[3]), len(cases)):
+    print(f"start {i}", flush=True)
+    try:
+        run_case(cs, cases[i]); print(f"done {i} answered", flush=True)
+    except Exception as e:
+        print(f"done {i} raised {type(e).__name__}", flush=True)
+print("end", len(cases), flush=True)
+'''
+    here = str(Path(__file__).resolve().parent)
+    start, outcome = 0, {}
+    while True:
+        try:
+            p = subprocess.run([sys.executable, "-c", code, src, graph, str(start), here], capture_output=True,
+                               text=True, timeout=600)
+            stdout, rc, err = p.stdout, p.returncode, p.stderr
+        except subprocess.TimeoutExpired as e:
+            stdout, rc, err = (e.stdout or b"").decode() if isinstance(e.stdout, bytes) else (e.stdout or ""), None, ""
+        last, total = None, None
+        for line in stdout.splitlines():
+            w = line.split()
+            if w[0] == "start":
+                last = int(w[1])
+            elif w[0] == "done":
+                outcome[int(w[1])] = " ".join(w[2:])
+                last = None
+            elif w[0] == "end":
+                total = int(w[1])
+        if total is not None:
+            break
+        if last is None:
+            raise RuntimeError(err[-2000:])
+        outcome[last] = ("hung (killed after 600 s)" if rc is None else f"crashed (signal {-rc})" if rc < 0
+                         else f"exit {rc}")
+        start = last + 1
+    counts: dict = {}
+    for v in outcome.values():
+        key = v.split(" (")[0] if v.startswith("crashed") else v
+        counts[key] = counts.get(key, 0) + 1
+    res = {"cases": total, "counts": counts, "crashed": sorted(k for k, v in outcome.items() if v.startswith("crashed"))}
+    if out:
+        Path(out).write_text(json.dumps(res, indent=1))
+    return res
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description="replay the invalid-observation cases on another source tree")
+    ap.add_argument("--old-code", required=True, help="source tree whose igraph_fight is tested (e.g. a copy of HEAD)")
+    ap.add_argument("--graph", default="/tmp/base/demo/graph.igz")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args()
+    print(json.dumps(_replay_on_old_code(a.old_code, a.graph, a.out), indent=1))
+
+
+def test_masks_beyond_the_graphs_never_alias_another_opponent_action(ctrl, graph_lib):
+    """The lookup key (Next-set, M_other, mask) keeps every valid mask (< 2 ** strikes of M_other)
+    apart: an observation whose mask no graph state holds is never answered, on the graph, from a
+    state of another opponent action (with a key stride of max graph mask + 2 it was, for masks
+    at or above that stride)."""
+    g, lib = graph_lib
+    a = g.arrays
+    stride = int(a["state_mask_other"].max()) + 2
+    lim = 1 << np.diff(lib.strike_offsets)
+    nf = np.diff(lib.frame_offsets)
+    tried = 0
+    for s in range(g.n_states):
+        for j in (1, 2, 3):        # (M_other - j, mask + j * stride) had the key of (M_other, mask)
+            mo = int(a["state_m_other"][s]) - j
+            k = int(a["state_mask_other"][s]) + j * stride
+            if mo < 0 or k >= lim[mo]:
+                continue
+            o = _state_obs(a, s)._replace(m_other=mo, f_other=min(int(a["state_f_other"][s]), int(nf[mo]) - 1),
+                                          mask_other=k)
+            st, _, off = ctrl.locate(o)
+            assert off or int(a["state_m_other"][st]) == mo, (s, o, st)
+            tried += 1
+    assert tried >= 20, tried

@@ -5,6 +5,11 @@ import dataclasses
 import inspect
 import json
 import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -15,8 +20,10 @@ from igraph_fight import sim, state
 from igraph_fight.build.pipeline import BuildOptions, build_graph
 from igraph_fight.graph import GraphFormatError, InteractionGraph
 from igraph_fight.sim import SimTables
+from motion_graph.atomic import KILL_ENV
 from motion_graph.errors import LibraryFormatError
 
+ROOT = Path(__file__).resolve().parent.parent
 SMALL = BuildOptions(max_samples=12_000, n_initial=32, chunk_parents=128, seed_bouts=0)
 
 
@@ -212,7 +219,7 @@ def test_corrupted_or_foreign_files_give_clear_errors(built, tmp_path, lib):
     with pytest.raises(GraphFormatError, match="corrupted"):
         InteractionGraph.load(tmp_path / "flip.igz")
     lib.save(tmp_path / "lib.npz")
-    with pytest.raises(GraphFormatError, match="not an interaction graph"):
+    with pytest.raises(GraphFormatError, match="not an igraph-fight graph file"):
         InteractionGraph.load(tmp_path / "lib.npz")
     with pytest.raises(LibraryFormatError, match="no such file"):
         InteractionGraph.load(tmp_path / "missing.igz")
@@ -244,6 +251,65 @@ def test_resume_after_interruption_gives_the_same_graph(lib, built, tmp_path):
     assert not ckpt.exists()
 
 
+#: a small build for the kill tests (about 2 s a run) and, per IGRAPH_FIGHT_TEST_KILL_AT stage,
+#: what the killed run leaves: the checkpoint's archive, the graph file, a temporary file
+KILL_ARGS = ["--max-samples", "2000", "--n-initial", "16", "--seed-bouts", "0", "--quiet", "--json"]
+KILL_STAGES = (("sample@2", True, False, False), ("cluster", True, False, False), ("link", True, False, False),
+               ("write", True, False, True), ("written", True, True, False))
+
+
+def test_a_kill_at_any_stage_then_the_same_command_gives_the_same_graph(lib, tmp_path):
+    """`igraph-fight build` SIGKILLed (by the test hook) while sampling, clustering, linking,
+    writing the file and after writing it: the same command then resumes from the checkpoint,
+    gives the uninterrupted build's graph and leaves only the graph file."""
+    lib_path = tmp_path / "lib.npz"
+    lib.save(lib_path)
+    want = build_graph(lib, dataclasses.replace(BuildOptions(), max_samples=2000, n_initial=16, seed_bouts=0),
+                       seed=0)[0].content_hash
+    env = {k: v for k, v in os.environ.items() if k != KILL_ENV}
+    for stage, ckpt_left, out_left, tmp_left in KILL_STAGES:
+        folder = tmp_path / stage.replace("@", "_")
+        folder.mkdir()
+        out = folder / "g.igz"
+        cmd = [sys.executable, "-m", "igraph_fight", "build", "--library", str(lib_path), "--out", str(out), *KILL_ARGS]
+        r = subprocess.run(cmd, env={**env, KILL_ENV: stage}, capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == -signal.SIGKILL, (stage, r.returncode, r.stderr[-2000:])
+        temps = [p.name for p in folder.iterdir() if ".tmp-" in p.name]
+        assert (folder / "g.igz.ckpt" / "archive.npz").exists() == ckpt_left, stage
+        assert out.exists() == out_left and bool(temps) == tmp_left, (stage, temps)
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == 0, (stage, r.stderr[-2000:])
+        rep = json.loads(r.stdout)
+        assert rep["content_hash"] == want and rep["resumed_from_checkpoint"], stage
+        assert [p.name for p in folder.iterdir()] == ["g.igz"], stage  # no checkpoint, no temporary file
+        assert InteractionGraph.load(out).content_hash == want
+
+
+def test_atomic_write_removes_only_stale_temp_files_of_dead_writers(tmp_path):
+    from motion_graph.atomic import atomic_write, atomic_write_bytes, stale_temp_files
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    target = tmp_path / "f.bin"
+    keep = {f".f.bin.tmp-{dead.pid}-0123abcd": False, f".f.bin.tmp-{os.getpid()}-0123abcd": True,
+            f".g.bin.tmp-{dead.pid}-0123abcd": True, f".f.bin.tmp-{dead.pid}": True, "f.bin.tmp": True}
+    for name in keep:
+        (tmp_path / name).write_bytes(b"x")
+    assert stale_temp_files(target) == [tmp_path / f".f.bin.tmp-{dead.pid}-0123abcd"]
+    atomic_write_bytes(target, b"new")
+    assert target.read_bytes() == b"new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([n for n, k in keep.items() if k] + ["f.bin"])
+
+    def fail(fh) -> None:
+        fh.write(b"half")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        atomic_write(target, fail)
+    assert target.read_bytes() == b"new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([n for n, k in keep.items() if k] + ["f.bin"])
+
+
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one core")
 def test_workers_do_not_change_the_graph(lib, built):
     g, _ = build_graph(lib, SMALL, seed=0, workers=2)
@@ -270,6 +336,9 @@ def test_cli_build_info_export(lib, tmp_path, capsys):
     assert (tmp_path / "g.graphml").stat().st_size > 0
     (tmp_path / "bad.igz").write_bytes(b"garbage")
     assert main(["graph", "info", str(tmp_path / "bad.igz")]) == 2
+    assert "not an igraph-fight graph file" in capsys.readouterr().err
+    (tmp_path / "cut.igz").write_bytes(out.read_bytes()[:5000])
+    assert main(["graph", "info", str(tmp_path / "cut.igz")]) == 2
     assert "truncated or corrupted" in capsys.readouterr().err
     # a leftover checkpoint of another build is refused with a clear message, --restart discards it
     ck = tmp_path / "g.igz.ckpt"

@@ -1,6 +1,7 @@
 """ActionLibrary: file round trip and corruption, playback, transitions, user labels, CLI."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -55,6 +56,22 @@ def test_truncated_and_corrupted_files(lib, tmp_path):
     np.savez(tmp_path / "future.npz", **arrays)
     with pytest.raises(LibraryFormatError, match="version 999"):
         load_library(tmp_path / "future.npz")
+
+
+def test_foreign_files_and_an_out_of_range_library_in_memory(lib, tmp_path):
+    from motion_graph.library import validate_library
+
+    (tmp_path / "notes.npz").write_text("not a library\n")
+    np.savez(tmp_path / "plain.npz", a=np.zeros(2))
+    with open(tmp_path / "graph.npz", "wb") as fh:
+        np.savez(fh, header=np.frombuffer(b'{"format": "igraph-fight/interaction-graph"}', dtype=np.uint8))
+    for name, why in (("notes.npz", "not a zip archive"), ("plain.npz", "no header"),
+                      ("graph.npz", "format 'igraph-fight/interaction-graph'")):
+        with pytest.raises(LibraryFormatError, match=rf"{name}: not an igraph-fight action library \({why}"):
+            load_library(tmp_path / name)
+    validate_library(lib)
+    with pytest.raises(LibraryFormatError, match=r"<library>: next_ids: .* is outside \[0, "):
+        validate_library(dataclasses.replace(lib, next_ids=lib.next_ids + lib.n_actions))
 
 
 def test_actions_start_at_origin_facing_forward(lib):

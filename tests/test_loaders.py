@@ -1,4 +1,5 @@
-"""BVH and ASF/AMC loaders on the real mocap, their error messages on malformed input, and semantic parts."""
+"""BVH and ASF/AMC loaders on the real mocap, their error messages on malformed and hostile input
+(caps, ASCII numbers, deep and cyclic hierarchies), and semantic parts."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,7 +13,7 @@ import pytest
 from motion_graph.errors import MocapFormatError
 from motion_graph.io import find_mocap_files, load_motion
 from motion_graph.io_asfamc import AsfSkeleton, load_amc, load_asf, load_asf_amc
-from motion_graph.io_bvh import load_bvh
+from motion_graph.io_bvh import load_bvh, save_bvh
 from motion_graph.motion import Motion
 from motion_graph.semantics import REQUIRED_PARTS, load_part_overrides, require_parts, resolve_parts
 
@@ -353,3 +354,223 @@ def test_part_override_file(cache: _Cache, tmp_path: Path) -> None:
     bad.write_text("{not json")
     with pytest.raises(MocapFormatError, match=str(bad)):
         load_part_overrides(bad)
+
+
+# ---------------------------------------------------------------- hostile input
+# Each of these crashed with another exception type, allocated from a declared count, or loaded
+# unusable data before the loaders were hardened.
+
+
+def _with(lines: list[str], index: int, new: str) -> list[str]:
+    out = list(lines)
+    out[index] = new
+    return out
+
+
+def _frames_index(lines: list[str]) -> int:
+    return lines.index("MOTION") + 1
+
+
+def _first_channels(lines: list[str]) -> int:
+    return next(i for i, line in enumerate(lines) if "CHANNELS" in line)
+
+
+def _nested(n: int, channels: str = "") -> list[str]:
+    """n nested JOINT blocks (and an End Site) as BVH lines."""
+    head = [f"JOINT j{k}\n{{\nOFFSET 0 1 0" + (f"\n{channels}" if channels else "") for k in range(n)]
+    return head + ["End Site\n{\nOFFSET 0 0 0\n}"] + ["}"] * n
+
+
+@pytest.mark.parametrize("value, match", [
+    ("\u00b2", "whole number"), ("+5", "whole number"), ("\uff12\uff10", "whole number"),
+    ("9" * 4301, "MAX_FRAMES"), ("300000000", "MAX_FRAMES"), ("300000", "MAX_FRAME_JOINTS"),
+])
+def test_bvh_frames_count_ascii_and_capped(tmp_path: Path, bvh_lines: list[str], value: str, match: str) -> None:
+    i = _frames_index(bvh_lines)
+    e = _raises(load_bvh, _write(tmp_path, "frames.bvh", _with(bvh_lines, i, f"Frames: {value}")), line=i + 1, match=match)
+    assert len(e.problem) < 200
+
+
+def test_bvh_declared_frames_beyond_the_data_allocate_nothing_large(tmp_path: Path, bvh_lines: list[str]) -> None:
+    import tracemalloc
+
+    p = _write(tmp_path, "many.bvh", _with(bvh_lines, _frames_index(bvh_lines), "Frames: 100000"))  # 20 lines present
+    tracemalloc.start()
+    try:
+        _raises(load_bvh, p, match="found 20")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 5 * 2**20, f"{peak / 2**20:.1f} MB allocated for 20 frames"  # 100000 x 96 floats = 77 MB
+
+
+@pytest.mark.parametrize("value, match", [
+    ("nan", "positive number"), ("inf", "positive number"), ("-0.01", "positive number"), ("0", "positive number"),
+    ("1_0", "positive number"), ("\uff10.1", "positive number"), ("1e-320", "outside"), ("11", "outside"),
+])
+def test_bvh_frame_time_finite_and_sane(tmp_path: Path, bvh_lines: list[str], value: str, match: str) -> None:
+    i = _frames_index(bvh_lines) + 1
+    _raises(load_bvh, _write(tmp_path, "ft.bvh", _with(bvh_lines, i, f"Frame Time: {value}")), line=i + 1, match=match)
+
+
+@pytest.mark.parametrize("value, match", [
+    ("nan", "non-finite value 'nan'"), ("-inf", "non-finite"), ("1e400", "overflows"), ("1_0", "non-numeric"),
+    ("\uff11", "non-numeric"), ("1e9", "MAX_ABS_LENGTH"),
+])
+def test_bvh_offsets_finite(tmp_path: Path, bvh_lines: list[str], value: str, match: str) -> None:
+    i = next(k for k, line in enumerate(bvh_lines) if "OFFSET" in line and k > 5)
+    _raises(load_bvh, _write(tmp_path, "off.bvh", _with(bvh_lines, i, f"OFFSET {value} 0 0")), line=i + 1, match=match)
+
+
+@pytest.mark.parametrize("value, match", [
+    ("1_0", "non-numeric value '1_0'"), ("infinity", "non-finite"), ("\uff11\uff12", "non-numeric"),
+    ("\u0663", "non-numeric"), ("0x1A", "non-numeric"), ("1e999", "overflows"), ("1e8", "MAX_ABS_LENGTH"),
+])
+def test_bvh_frame_values_ascii_and_finite(tmp_path: Path, bvh_lines: list[str], value: str, match: str) -> None:
+    i = _frame_line(bvh_lines, 2) - 1
+    toks = bvh_lines[i].split()  # the root's Xposition comes first
+    _raises(load_bvh, _write(tmp_path, "v.bvh", _with(bvh_lines, i, " ".join([value] + toks[1:]))), line=i + 1, match=match)
+
+
+@pytest.mark.parametrize("line, match", [
+    ("CHANNELS \u00b3 Zrotation Yrotation Xrotation", "needs a count"),
+    ("CHANNELS 7 Zrotation Yrotation Xrotation Xrotation Xposition Yposition Zposition", "at most 6"),
+    ("CHANNELS 3 Zrotation Zrotation Xrotation", "twice"),
+    ("CHANNELS 3 Zrotation Yrotation", "names 2"),
+])
+def test_bvh_channels_checked(tmp_path: Path, bvh_lines: list[str], line: str, match: str) -> None:
+    i = _first_channels(bvh_lines)
+    _raises(load_bvh, _write(tmp_path, "ch.bvh", _with(bvh_lines, i, line)), line=i + 1, match=match)
+
+
+def test_bvh_20000_nested_joints_refused_early(tmp_path: Path, bvh_lines: list[str]) -> None:
+    import tracemalloc
+
+    i = _first_channels(bvh_lines) + 1
+    p = _write(tmp_path, "deep.bvh", bvh_lines[:i] + _nested(20_000) + bvh_lines[i:])
+    tracemalloc.start()
+    try:
+        _raises(load_bvh, p, match="MAX_JOINTS")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 40 * 2**20, f"{peak / 2**20:.0f} MB"
+
+
+def test_bvh_deep_chain_loads_and_saves(tmp_path: Path, bvh_lines: list[str]) -> None:
+    i = _first_channels(bvh_lines) + 1
+    m = load_bvh(_write(tmp_path, "chain.bvh", bvh_lines[:i] + _nested(3000) + bvh_lines[i:]))
+    assert m.skeleton.n_joints == 38 + 3001 and m.n_frames == N_SMALL
+    assert int(m.skeleton.parents[3001]) == 3000  # the chain's End Site hangs under its deepest joint
+    assert np.all(np.isfinite(m.positions()))
+    save_bvh(m, tmp_path / "back.bvh")  # the writer walks the tree without recursion too
+    back = load_bvh(tmp_path / "back.bvh", metres_per_unit=0.01)
+    np.testing.assert_array_equal(back.skeleton.parents, m.skeleton.parents)
+    np.testing.assert_allclose(back.positions(), m.positions(), atol=1e-4)
+
+
+def test_bvh_bom_and_line_ends_load_the_same(tmp_path: Path, bvh_lines: list[str]) -> None:
+    ref = load_bvh(_write(tmp_path, "lf.bvh", bvh_lines))
+    text = "\n".join(bvh_lines) + "\n"
+    for name, data in (("bom.bvh", b"\xef\xbb\xbf" + text.encode()), ("crlf.bvh", text.replace("\n", "\r\n").encode()),
+                       ("cr.bvh", text.replace("\n", "\r").encode())):
+        (tmp_path / name).write_bytes(data)
+        m = load_bvh(tmp_path / name)
+        np.testing.assert_array_equal(m.rotations, ref.rotations)
+        np.testing.assert_array_equal(m.root_positions, ref.root_positions)
+        assert m.skeleton.names == ref.skeleton.names and m.fps == ref.fps
+
+
+def test_bvh_messages_quote_at_most_80_characters(tmp_path: Path, bvh_lines: list[str]) -> None:
+    e = _raises(load_bvh, _write(tmp_path, "long.bvh", _with(bvh_lines, 3, "x" * 10_000)), line=4)
+    assert "'" + "x" * 80 + "'..." in e.problem and len(e.problem) < 140
+    name = "J" * 5000
+    i = next(k for k, line in enumerate(bvh_lines) if line.strip().startswith("JOINT"))
+    _raises(load_bvh, _write(tmp_path, "name.bvh", _with(bvh_lines, i, f"JOINT {name}")), line=i + 1, match="longer than")
+
+
+@pytest.mark.parametrize("fps", [-30, 0, float("nan"), float("inf"), 1e9])
+def test_fps_override_must_be_positive_and_finite(tmp_path: Path, bvh_lines: list[str], fps: float) -> None:
+    p = _write(tmp_path, "ok.bvh", bvh_lines)
+    for load in (load_motion, load_bvh):
+        with pytest.raises(MocapFormatError, match="fps must be") as ei:
+            load(p, fps=fps)
+        assert isinstance(ei.value, ValueError) and ei.value.path == str(p)
+    with pytest.raises(MocapFormatError, match="metres_per_unit"):
+        load_motion(p, metres_per_unit=float("nan"))
+    with pytest.raises(MocapFormatError, match="metres_per_unit"):
+        load_motion(p, metres_per_unit=-1)
+
+
+def _asf_with(asf_path: Path, edit) -> list[str]:
+    return edit(asf_path.read_bytes().decode().splitlines())
+
+
+def _hierarchy_end(lines: list[str]) -> int:
+    return max(i for i, line in enumerate(lines) if line.strip() == "end")
+
+
+@pytest.mark.parametrize("extra", ["ltibia lfemur", "lfemur lfemur", "root lhipjoint"])
+def test_asf_cycle_or_two_parents_refused(tmp_path: Path, asf_path: Path, extra: str) -> None:
+    lines = _asf_with(asf_path, lambda ls: ls[:_hierarchy_end(ls)] + [f"    {extra}"] + ls[_hierarchy_end(ls):])
+    _raises(load_asf, _write(tmp_path, "cyc.asf", lines, eol="\r\n"), match="reached twice")
+
+
+def test_asf_2000_bone_chain_loads(tmp_path: Path, asf_path: Path, amc_lines: list[str]) -> None:
+    def edit(ls: list[str]) -> list[str]:
+        bones = [f"  begin\n     id {100 + k}\n     name b{k}\n     direction 0 1 0\n     length 0.5\n"
+                 f"     axis 0 0 0  XYZ\n  end" for k in range(2000)]
+        links = ["    lowerback b0"] + [f"    b{k} b{k + 1}" for k in range(1999)]
+        h, e = ls.index(":hierarchy"), _hierarchy_end(ls)
+        return ls[:h] + bones + ls[h:e] + links + ls[e:]
+    _write(tmp_path, "13.asf", _asf_with(asf_path, edit), eol="\r\n")
+    m = load_motion(_write(tmp_path, "13_90.amc", amc_lines, eol="\r\n"))
+    assert m.skeleton.n_joints == 38 + 2001 and m.n_frames == N_SMALL  # 2000 bones and an end site
+    assert np.all(np.isfinite(m.positions()))
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("axis 0 0 20  XYZ", "axis 0 0 20  XYQ", "axis order"),
+    ("axis 0 0 20  XYZ", "axis 0 0 20  XY", "axis order"),
+    ("axis XYZ", "axis XXY", "axis order"),
+    ("name lfemur", "name", "name needs one value"),
+    ("length 7.61162", "length", "length needs one value"),
+    ("axis 0 0 20  XYZ", "axis", "axis needs 3 angles"),
+    ("axis 0 0 20  XYZ", "axis nan 0 20 XYZ", "non-finite"),
+    ("length 0.45", "length nan", "non-finite"),
+    ("length 0.45", "length inf", "non-finite"),
+    ("length 0.45", "length 1e-320", "no finite metres per unit"),
+    ("length 7.61162", "length 1e300", "MAX_ABS_LENGTH"),
+    ("direction 0.34202 -0.939693 0", "direction inf 0 0", "non-finite"),
+    ("dof rx ry rz", "dof rx rx rz", "twice"),
+])
+def test_asf_bad_values_refused(tmp_path: Path, asf_path: Path, old: str, new: str, match: str) -> None:
+    def edit(ls: list[str]) -> list[str]:
+        i = next(k for k, line in enumerate(ls) if line.strip().startswith(old))
+        return _with(ls, i, "     " + new)
+    _raises(load_asf, _write(tmp_path, "bad.asf", _asf_with(asf_path, edit), eol="\r\n"), match=match)
+
+
+@pytest.mark.parametrize("number", ["\u00b2", "9" * 5000, "\uff15"])
+def test_amc_frame_number_ascii(tmp_path: Path, amc_lines: list[str], asf: AsfSkeleton, number: str) -> None:
+    i = amc_lines.index("5")
+    _raises(lambda q: load_amc(q, asf), _write(tmp_path, "n.amc", _with(amc_lines, i, number), eol="\r\n"), line=i + 1)
+
+
+def test_amc_angle_overflow_refused(tmp_path: Path, amc_lines: list[str], asf: AsfSkeleton) -> None:
+    lines = [line for line in amc_lines if line != ":DEGREES"]
+    lines.insert(1, ":RADIANS")  # 1e307 radians overflows to inf degrees
+    ln = _amc_line(lines, 3, "lfemur")
+    lines[ln - 1] = "lfemur 1e307 0 0"
+    _raises(lambda q: load_amc(q, asf), _write(tmp_path, "big.amc", lines, eol="\r\n"), match="not finite")
+    ln = _amc_line(amc_lines, 3, "root")
+    _raises(lambda q: load_amc(q, asf), _write(tmp_path, "far.amc", _with(amc_lines, ln - 1, "root 1e300 0 0 0 0 0"),
+                                                  eol="\r\n"), line=ln, match="MAX_ABS_LENGTH")
+
+
+def test_missing_parts_message_is_short(cache: _Cache) -> None:
+    sk = cache.motion(BANDAI).skeleton
+    odd = dataclasses.replace(sk, names=tuple("Q" * 500 + str(i) for i in range(sk.n_joints)))
+    with pytest.raises(MocapFormatError, match="pelvis") as ei:
+        require_parts(odd, resolve_parts(odd), "odd.bvh")
+    assert len(ei.value.problem) < 800 and f"({sk.n_joints})" in ei.value.problem  # 27 names of 500 characters cut

@@ -22,6 +22,8 @@ import argparse
 import json
 import sys
 
+from igraph_fight.cli import non_negative_int, positive_float, positive_int, probability
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("tracker", help="physics tracking of action-graph walks in MuJoCo",
@@ -38,9 +40,9 @@ def register(subparsers) -> None:
                        "tracker/track/vforce.py) or learned (the learned policy, tracker/track/policy_net.py)")
         q.add_argument("--ckpt", help="controller checkpoint (learned policy, default the shipped "
                                       "tracker/checkpoints/boxing_cmu13.pt; for pd a JSON of gains)")
-        q.add_argument("--physics-hz", type=float, default=240.0, help="physics rate (default 240)")
-        q.add_argument("--seed", type=int, default=0, help="random seed of the walks (default 0)")
-        q.add_argument("--actions", type=int, default=20, help="actions per walk (default 20)")
+        q.add_argument("--physics-hz", type=positive_float, default=240.0, help="physics rate (default 240)")
+        q.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the walks (default 0)")
+        q.add_argument("--actions", type=positive_int, default=20, help="actions per walk (default 20)")
 
     e = sub.add_parser("eval", help="random walks through the action graph, tracked; completion, time to fall, error",
                        description="The walk protocol (docs/protocols.md, Tracking). With --assist the batched "
@@ -52,15 +54,15 @@ def register(subparsers) -> None:
     e.add_argument("--assist", choices=("none", "fixed", "learned"), default=None,
                    help="the balance assist: none (physics), fixed (a PD wrench toward the reference root pose) or "
                         "learned (the assisted tracker's own); figures are labelled assisted physics (cap C mg)")
-    e.add_argument("--cap", type=float, default=None,
+    e.add_argument("--cap", type=positive_float, default=None,
                    help="assist cap in body weights (force c*mg, torque c*mg*1 m); default 0.5 for fixed, the "
                         "policy's own for learned")
-    e.add_argument("--parallel", type=int, default=8, help="walks simulated side by side in one process (batched "
-                   "env; default 8; the figures do not depend on it except the real-time factor)")
-    e.add_argument("--walks", type=int, default=100, help="number of walks (default 100)")
+    e.add_argument("--parallel", type=positive_int, default=8, help="walks simulated side by side in one process "
+                   "(batched env; default 8; the figures do not depend on it except the real-time factor)")
+    e.add_argument("--walks", type=positive_int, default=100, help="number of walks (default 100)")
     e.add_argument("--json", action="store_true", help="print the metrics as JSON")
     e.add_argument("--progress", action="store_true", help="show a progress bar")
-    e.add_argument("--workers", type=int, default=1, help="processes tracking walks in parallel (default 1; "
+    e.add_argument("--workers", type=positive_int, default=1, help="processes tracking walks in parallel (default 1; "
                    "the metrics equal a serial run's, the real-time factor is per process)")
     e.set_defaults(func=cmd_eval)
 
@@ -68,12 +70,12 @@ def register(subparsers) -> None:
     source_args(r)
     r.set_defaults(actions=6)
     r.add_argument("--out", required=True, help="output .png (contact sheet) or .mp4 (video)")
-    r.add_argument("--walk-index", type=int, default=0, help="which walk of the seed (default 0: the first)")
-    r.add_argument("--seconds", type=float, default=6.0, help="seconds of motion to show (default 6)")
-    r.add_argument("--frames", type=int, default=8, help="contact sheet columns (default 8)")
-    r.add_argument("--video-fps", type=float, default=15.0, help="MP4 frame rate (default 15)")
-    r.add_argument("--width", type=int, default=400)
-    r.add_argument("--height", type=int, default=300)
+    r.add_argument("--walk-index", type=non_negative_int, default=0, help="which walk of the seed (default 0: the first)")
+    r.add_argument("--seconds", type=positive_float, default=6.0, help="seconds of motion to show (default 6)")
+    r.add_argument("--frames", type=positive_int, default=8, help="contact sheet columns (default 8)")
+    r.add_argument("--video-fps", type=positive_float, default=15.0, help="MP4 frame rate (default 15)")
+    r.add_argument("--width", type=positive_int, default=400)
+    r.add_argument("--height", type=positive_int, default=300)
     r.add_argument("--backend", choices=("egl", "osmesa"), help="OpenGL backend (default: EGL, else OSMesa)")
     r.set_defaults(func=cmd_render)
 
@@ -101,7 +103,7 @@ def register(subparsers) -> None:
     m.add_argument("file", help=".bvh or .amc file")
     m.add_argument("--out", required=True, help="output .xml")
     m.add_argument("--fighters", type=int, default=1, choices=(1, 2))
-    m.add_argument("--physics-hz", type=float, default=240.0)
+    m.add_argument("--physics-hz", type=positive_float, default=240.0)
     m.set_defaults(func=cmd_model)
 
     from tracker.bouts.cli import add_bout_commands, add_hit_model_commands, add_rl_commands
@@ -113,15 +115,15 @@ def register(subparsers) -> None:
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
     """Arguments of `tracker train` (here, not in tracker.learn.train_tracker, so the CLI starts without torch)."""
     p.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
-    p.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
+    p.add_argument("--minutes", type=positive_float, required=True, help="wall-clock minutes to train (this run)")
     p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it, and for "
                    "search runs the label buffer (CKPT.labels.npz, reloaded by --resume)")
     p.add_argument("--resume", help="continue from this checkpoint (its config is kept)")
     p.add_argument("--device", default="auto", help="auto (GPU when present, else CPU), cpu or cuda")
-    p.add_argument("--workers", type=int, default=2, help="environment processes (default 2: one per core)")
-    p.add_argument("--envs", type=int, default=16, help="environments per worker (default 16)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--push-prob", type=float, help="per-step chance of a push (default: the config's)")
+    p.add_argument("--workers", type=positive_int, default=2, help="environment processes (default 2: one per core)")
+    p.add_argument("--envs", type=positive_int, default=16, help="environments per worker (default 16)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
+    p.add_argument("--push-prob", type=probability, help="per-step chance of a push, in [0, 1] (default: the config's)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a TrainConfig field (repeatable), e.g. --set lr_actor=1e-4 --set push_prob=0.01")
     p.add_argument("--slim", action="store_true", help="also write OUT-slim.pt: without the optimizer state (to ship)")
@@ -149,14 +151,14 @@ def _controller(args):
 def cmd_eval(args) -> int:
     from tracker.track.evaluation import evaluate_walks, format_report
     if args.walks < 1 or args.actions < 1:
-        print("igraph-fight tracker eval: --walks and --actions must be >= 1", file=sys.stderr)
+        print("igraph-fight: error: tracker eval: --walks and --actions must be >= 1", file=sys.stderr)
         return 2
     if getattr(args, "assist", None) is not None or args.controller == "assisted":
         return _eval_batched(args)
     try:
         controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
-        print(f"igraph-fight tracker eval: {e}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker eval: {e}", file=sys.stderr)
         return 2
     setup = _setup(args)
     metrics = evaluate_walks(setup, controller, args.walks, args.actions, args.seed, progress=args.progress,
@@ -234,12 +236,12 @@ def cmd_render(args) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".mp4"):
-        print("igraph-fight tracker render: --out must end in .png or .mp4", file=sys.stderr)
+        print("igraph-fight: error: tracker render: --out must end in .png or .mp4", file=sys.stderr)
         return 2
     try:
         controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
-        print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker render: {e}", file=sys.stderr)
         return 2
     setup = _setup(args)
     walks = draw_walks(setup.source, args.walk_index + 1, args.actions, args.seed)
@@ -255,7 +257,7 @@ def cmd_render(args) -> int:
     try:
         frames = render_frames(setup.scene, ref, ro, steps, args.width, args.height, args.backend)
     except RuntimeError as e:
-        print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker render: {e}", file=sys.stderr)
         return 1
     if out.suffix.lower() == ".png":
         save_contact_sheet(frames, out)
@@ -263,7 +265,7 @@ def cmd_render(args) -> int:
         try:
             save_video(frames, out, ref.fps / max(1, int(round(ref.fps / args.video_fps))))
         except RuntimeError as e:
-            print(f"igraph-fight tracker render: {e}", file=sys.stderr)
+            print(f"igraph-fight: error: tracker render: {e}", file=sys.stderr)
             return 1
     st = image_stats(frames[0][1])
     fell = f"fell at {ro.fall_step / ref.fps:.2f} s ({ro.fall_reason})" if ro.fall_step is not None else "no fall"

@@ -18,6 +18,9 @@ import numpy as np
 
 CHECKPOINT_DIR = Path(__file__).resolve().parent.parent / "checkpoints"
 HIT_CAP_S = 3.0
+#: the checkpoint's format and version (igraph_fight.checkpoint; igraph_fight/checkpoints/README.md)
+RL_FORMAT = "igraph-fight/rl-ppo"
+RL_VERSION = 2
 
 
 def default_checkpoint(style: str = "infighter") -> Path:
@@ -106,8 +109,10 @@ def make_network(obs_dim: int, n_actions: int, hidden: int = 128):
 
 
 def load_checkpoint(path: str | Path) -> dict:
-    import torch
-    return torch.load(str(path), map_location="cpu", weights_only=False)
+    """An RL policy checkpoint (igraph_fight.checkpoint.load_checkpoint: read weights-only, format
+    checked); a CheckpointError naming the file otherwise."""
+    from igraph_fight.checkpoint import load_checkpoint as load_versioned
+    return load_versioned(path, RL_FORMAT, (RL_VERSION,), what="RL policy")
 
 
 class RLAgent:

@@ -3,6 +3,14 @@
 ``build_graph`` is the Python entry point (the ``igraph-fight build`` command only parses its
 arguments and calls it). The result depends only on the library, the options and the seed: the
 thread count (``workers``) and interruptions (the sampler checkpoints its archive) change nothing.
+
+Crash safety: the sampler's checkpoint is written atomically after every chunk; clustering and
+linking are recomputed from the finished archive on a rerun; with ``out`` the graph file is
+written atomically (motion_graph.atomic) and only then is the checkpoint removed. A kill at any
+point followed by the same call gives the same graph. Test hook: the stages at which
+motion_graph.atomic.kill_point may kill the process (IGRAPH_FIGHT_TEST_KILL_AT) are ``sample``
+(after each sampler checkpoint), ``cluster``, ``link``, ``write`` (graph file written, not yet
+renamed into place) and ``written`` (in place, checkpoint not yet removed).
 """
 from __future__ import annotations
 
@@ -19,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from motion_graph.atomic import atomic_write_text
+from motion_graph.atomic import atomic_write_text, fsync_dir, kill_point
 
 from igraph_fight.build import cluster, edges, explore
 from igraph_fight import sim
@@ -148,7 +156,7 @@ def peak_rss_mb() -> float:
 def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, workers: int | None = 1,
                 checkpoint_dir: str | os.PathLike | None = None, progress: bool = False,
                 on_chunk: Callable[[int, int], None] | None = None,
-                keep_checkpoint: bool = False) -> tuple[InteractionGraph, dict]:
+                keep_checkpoint: bool = False, out: str | os.PathLike | None = None) -> tuple[InteractionGraph, dict]:
     """Build the Interaction Graph of ``library`` (a motion_graph.ActionLibrary).
 
     Args:
@@ -156,9 +164,10 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         workers: threads (None or 0: all cores); does not change the result.
         checkpoint_dir: folder for the sampler checkpoint (``archive.npz``); a build with the same
             library, options and seed resumes from it; one with other inputs raises ValueError.
-            Removed after success unless ``keep_checkpoint``.
+            Removed after success (after ``out`` is in place) unless ``keep_checkpoint``.
         progress: progress bars on stderr.
         on_chunk: called after each sampler checkpoint (chunks done, samples).
+        out: write the graph file here (InteractionGraph.save) before the checkpoint is removed.
     Returns (graph, report); the report has n_states, n_edges, build_seconds, peak_rss_mb,
     dead_end_fraction, snap_mean_cm, snap_max_cm and more.
     """
@@ -183,15 +192,23 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         from igraph_fight.build.seeding import bout_seed_states
         extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed,
                                  options.seed_pairing)
-    arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, on_chunk, workers,
+
+    def chunk_done(chunks: int, n: int) -> None:
+        kill_point("sample")
+        if on_chunk is not None:
+            on_chunk(chunks, n)
+
+    arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, chunk_done, workers,
                           extra_initial=extra)
     timings["explore_s"] = time.perf_counter() - t
 
+    kill_point("cluster")
     t = time.perf_counter()
     grows = explore.group_rows(tables.nextset, arc.si, options.f0)
     cl = cluster.cluster_samples(grows, arc.si, arc.sf, options.cluster_options())
     timings["cluster_s"] = time.perf_counter() - t
 
+    kill_point("link")
     t = time.perf_counter()
     ed = edges.link(tables, cl.si, cl.sf, options.f0, options.link_tol_r_m, options.link_tol_theta_rad,
                     options.max_distance_m, options.prune_dead_ends, options.s_r_m, options.s_theta_rad,
@@ -219,9 +236,18 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
     })
     graph.arrays["library_npz"] = np.frombuffer(library.to_bytes(), dtype=np.uint8)
     rep["content_hash"] = graph.content_hash
+    if out is not None:
+        graph.save(out)
+        kill_point("written")
     if checkpoint_dir is not None and not keep_checkpoint:
-        shutil.rmtree(checkpoint_dir, ignore_errors=True)
+        remove_checkpoint(checkpoint_dir)
     return graph, rep
+
+
+def remove_checkpoint(checkpoint_dir: str | os.PathLike) -> None:
+    """Delete a build's checkpoint folder and fsync its parent."""
+    shutil.rmtree(checkpoint_dir, ignore_errors=True)
+    fsync_dir(Path(checkpoint_dir).parent)
 
 
 def _assemble(tables: SimTables, cl: cluster.Clusters, ed: edges.Edges,

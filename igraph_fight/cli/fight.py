@@ -6,6 +6,8 @@ import json
 import statistics
 import sys
 
+from igraph_fight.cli import check_swap, depth, gamma, non_negative_int, positive_float, positive_int, swap
+
 
 def register(sub) -> None:
     p = sub.add_parser("fight", help="a bout between two Interaction Graph fighters, with artifacts to watch")
@@ -15,18 +17,20 @@ def register(sub) -> None:
                    "physics bouts also take STYLE+phys[:MODEL], STYLE+close[=R,THETA][:avoid=A,B,...] (turn and close in "
                    "by a geometric rule until engaged: igraph_fight.closing), both, and rl[:CKPT]")
     p.add_argument("--b", default="outboxer", help="style of fighter B (default outboxer)")
-    p.add_argument("--depth-a", type=int, default=5, help="min-max depth of A (default 5)")
-    p.add_argument("--depth-b", type=int, default=5, help="min-max depth of B (default 5)")
-    p.add_argument("--swap-a", default=None, metavar="T:STYLE",
-                   help="switch A's style at T seconds (e.g. 30:outboxer)")
+    p.add_argument("--depth-a", type=depth, default=5, help="min-max depth of A (default 5; 1..12)")
+    p.add_argument("--depth-b", type=depth, default=5, help="min-max depth of B (default 5; 1..12)")
+    p.add_argument("--swap-a", type=swap, default=None, metavar="T:STYLE",
+                   help="switch A's style at T seconds (e.g. 30:outboxer), within the bout")
     p.add_argument("--first-ply-a", choices=("table", "exact", "exact2"), default="table",
                    help="A's decision rule: the policy table (default), one exact ply, or two exact plies over "
                         "the graph's values (stronger, about 1 ms a decision)")
     p.add_argument("--first-ply-b", choices=("table", "exact", "exact2"), default="table", help="B's decision rule")
-    p.add_argument("--seconds", type=float, default=60.0)
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seconds", type=positive_float, default=60.0, help="bout length (default 60 s)")
+    p.add_argument("--seed", type=non_negative_int, default=1)
     p.add_argument("--out", default="out/fight", help="output folder (default out/fight)")
     p.add_argument("--physics", action="store_true", help="run the bout in MuJoCo physics (tracker)")
+    p.add_argument("--no-video", dest="video", action="store_false", default=None,
+                   help="physics: no bout.mp4 (default: written unless $IGRAPH_FIGHT_VIDEO is 0)")
     p.add_argument("--reset-place", choices=("reference", "fall"), default="reference",
                    help="physics: where a fallen fighter gets up: on its reference pelvis (default; the topple "
                         "undone) or where its pelvis was when the fall was detected")
@@ -42,9 +46,10 @@ def register(sub) -> None:
     p = sub.add_parser("policy", help="compute a policy table for a style and report its cost")
     p.add_argument("--graph", required=True)
     p.add_argument("--style", default="balanced", help="preset name or style file")
-    p.add_argument("--depth", type=int, default=5)
-    p.add_argument("--gamma", type=float, default=None, help="discount per decision (default planner.DEFAULT_GAMMA, 0.5)")
-    p.add_argument("--repeat", type=int, default=5, help="runs to take the median over (default 5)")
+    p.add_argument("--depth", type=depth, default=5, help="min-max depth (default 5; 1..12)")
+    p.add_argument("--gamma", type=gamma, default=None,
+                   help="discount per decision, in (0, 1] (default planner.DEFAULT_GAMMA, 0.5)")
+    p.add_argument("--repeat", type=positive_int, default=5, help="runs to take the median over (default 5)")
     p.add_argument("--out", default=None, help="save the policy table (.npz)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_policy)
@@ -64,18 +69,15 @@ def cmd_fight(args: argparse.Namespace) -> int:
             return 2
         return physics_fight(args)
     if (getattr(args, "reset_place", "reference") != "reference" or getattr(args, "reset_facing", "opponent") != "opponent"
-            or getattr(args, "tracker", None)):
-        print("igraph-fight: error: --reset-place / --reset-facing / --tracker apply to physics bouts only (add --physics)",
-              file=sys.stderr)
+            or getattr(args, "tracker", None) or getattr(args, "video", None) is not None):
+        print("igraph-fight: error: --reset-place / --reset-facing / --tracker / --no-video apply to physics bouts only "
+              "(add --physics)", file=sys.stderr)
         return 2
     from igraph_fight.style_bout import run_style_bout
 
-    swap = None
-    if args.swap_a:
-        t, _, style = args.swap_a.partition(":")
-        swap = (float(t), style)
+    swap_a = check_swap(args.swap_a, args.seconds)
     summary = run_style_bout(args.graph, args.a, args.b, args.depth_a, args.depth_b, args.seconds, args.seed,
-                             args.out, library=args.library, swap_a=swap, progress=not args.json,
+                             args.out, library=args.library, swap_a=swap_a, progress=not args.json,
                              first_ply_a=fp_a, first_ply_b=fp_b)
     if args.json:
         print(json.dumps(summary))

@@ -35,7 +35,8 @@ def _share_deg(text: str) -> tuple[float, float]:
 def register(sub) -> None:
     p = sub.add_parser("build", help="explore, cluster and link an Interaction Graph from mocap or a library",
                        description="Build an Interaction Graph. The sampler's archive is checkpointed to "
-                                   "OUT.ckpt/ after every chunk: rerunning an interrupted command resumes it.")
+                                   "OUT.ckpt/ after every chunk, and removed only once OUT is written: rerunning "
+                                   "an interrupted command (killed at any point) resumes it and gives the same graph.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--mocap", nargs="+", metavar="DIR_OR_FILE", help="mocap folder(s) or .bvh/.amc files")
     src.add_argument("--library", metavar="LIB", help="a saved action library (.npz) instead of --mocap")
@@ -153,8 +154,9 @@ def cmd_build(args: argparse.Namespace) -> int:
             return 2
         if show and not args.json:
             print(f"resuming from {ckpt} ({header.get('n')} samples)", file=sys.stderr)
-    graph, rep = build_graph(lib, options, seed=args.seed, workers=args.workers, checkpoint_dir=ckpt, progress=show)
-    graph.save(args.out)
+    # the graph file is in place before the checkpoint goes: a kill at any point, then the same command, resumes
+    _, rep = build_graph(lib, options, seed=args.seed, workers=args.workers, checkpoint_dir=ckpt, progress=show,
+                         out=args.out)
     rep["graph_seconds"] = rep["build_seconds"]
     rep["build_seconds"] = time.perf_counter() - t0
     rep["out"] = str(args.out)

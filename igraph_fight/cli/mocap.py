@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from igraph_fight.cli import non_negative_int, positive_float
+
 
 def register(sub) -> None:
     mocap = sub.add_parser("mocap", help="inspect and segment motion-capture files")
@@ -15,7 +17,7 @@ def register(sub) -> None:
 
     p = msub.add_parser("inspect", help="frames, fps, duration, skeleton, units and foot contacts of mocap files")
     p.add_argument("files", nargs="+", help=".bvh or .amc files (or folders)")
-    p.add_argument("--fps", type=float, default=None, help="override the frame rate (frames/s)")
+    p.add_argument("--fps", type=positive_float, default=None, help="override the frame rate (frames/s)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_inspect)
 
@@ -25,9 +27,9 @@ def register(sub) -> None:
     p.add_argument("--out", default=None, help="action-library file to write (.npz)")
     p.add_argument("--labels", default=None, help="user label file overriding automatic labels")
     p.add_argument("--plot", default=None, help="write a segmentation timeline (PNG)")
-    p.add_argument("--fps", type=float, default=None, help="override the source frame rate")
-    p.add_argument("--library-fps", type=float, default=30.0, help="frame rate of the library (default 30)")
-    p.add_argument("--next-threshold", type=float, default=None,
+    p.add_argument("--fps", type=positive_float, default=None, help="override the source frame rate")
+    p.add_argument("--library-fps", type=positive_float, default=30.0, help="frame rate of the library (default 30)")
+    p.add_argument("--next-threshold", type=positive_float, default=None,
                    help="pose-hub size (m): boundary poses within this mean joint distance share a hub, and a -> b when b starts in the hub where a ends (default 0.20)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_segment)
@@ -35,7 +37,7 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="run the whole kinematic chain on the CMU boxing takes and write its artifacts")
     p.add_argument("--mocap", default=None, help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=non_negative_int, default=0)
     p.set_defaults(func=cmd_demo)
 
     data = sub.add_parser("data", help="download public mocap")
@@ -49,12 +51,16 @@ def register(sub) -> None:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     from motion_graph.contacts import contact_summary, foot_contacts
+    from motion_graph.errors import MocapFormatError
     from motion_graph.features import clip_features
     from motion_graph.io import find_mocap_files, load_motion
     from motion_graph.semantics import resolve_parts
 
+    files = find_mocap_files(args.files)
+    if not files:
+        raise MocapFormatError(", ".join(args.files), "no .bvh or .amc files found")
     rows = []
-    for f in find_mocap_files(args.files):
+    for f in files:
         m = load_motion(f, fps=args.fps)
         parts = resolve_parts(m.skeleton)
         row = {

@@ -66,6 +66,7 @@ class EvalConfig:
     h2h_bouts: int | None = None                # default: bouts
     regret_every: int = 8                       # every k-th IG decision: exact depth-3 regret (0: off)
     regret_depth: int = 3
+    human_logs: str | None = None               # folder of bouts saved by `igraph-fight play` (the real human column)
     progress: bool = True
     command: str = ""
     extra: dict = field(default_factory=dict)

@@ -326,6 +326,9 @@ def markdown(rep: dict) -> str:
     for r, row in rep["table"].items():
         L.append(f"| {r} | " + " | ".join(f"{row[c]['hits_ig']:.1f} / {row[c]['hits_opponent']:.1f}, "
                                           f"{row[c]['mean_distance_m']:.2f}" for c in cols) + " |")
+    if rep.get("human_logs"):
+        from igraph_fight.evaluate.human_logs import markdown_section
+        L.extend(markdown_section(rep["human_logs"], rep["table"]))
     L.append("\n## Targets\n")
     for k, v in rep["targets"].items():
         if isinstance(v, dict):

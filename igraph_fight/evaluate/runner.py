@@ -20,7 +20,8 @@ the decision cost of every agent (µs per decision, wall
 clock inside ``step``), the kind of every action chosen (histograms per agent), the IG
 fighters' off-graph rate (with the reason: no compatible group / out of tolerance), the RL
 baseline's budget, learning curve, head-to-head bouts (with its outboxer retrain) and the
-planner's style-swap time.
+planner's style-swap time. With ``human_logs``, the bouts people saved in `igraph-fight play`
+give the real human column (evaluate.human_logs), reported beside the scripted proxy's.
 
 Bouts run in ``workers`` processes (fork; each task is self-contained and seeded, so results
 do not depend on the worker count). Everything but timings is a function of the graph, the
@@ -359,6 +360,9 @@ def evaluate(cfg: EvalConfig, out: str | Path) -> dict:
     t_bouts = time.perf_counter() - t_b
     swap = _style_swap_ms(ctx) if cfg.depths else {}
     report = aggregate(cfg, ctx, rl, results, notes)
+    if cfg.human_logs:
+        from igraph_fight.evaluate.human_logs import human_table
+        report["human_logs"] = human_table(cfg.human_logs, cfg.depths, ctx["graph"].content_hash)
     report["style_swap_ms"] = swap.get("median_ms")
     report["timing"]["style_swap"] = swap
     report["timing"].update({"setup_s": t_setup, "rl_s": t_rl, "bouts_s": t_bouts,

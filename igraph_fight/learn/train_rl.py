@@ -11,9 +11,9 @@ Opponents, drawn per episode: a frozen snapshot of the learner (self-play, refre
     igraph-fight train-rl --graph G.igz --style infighter --out igraph_fight/checkpoints/rl_infighter.pt
     igraph-fight train-rl --graph G.igz --style outboxer --init-from igraph_fight/checkpoints/rl_infighter.pt ...
 
-The checkpoint (torch.save dict, ~0.4 MB) holds the weights, the config, the budget actually
-spent (CPU minutes of the process, wall minutes, learner decisions, updates), the learning curve
-and the library fingerprint. Deterministic for a seed (single torch thread).
+The checkpoint (igraph_fight.checkpoint, format igraph-fight/rl-ppo, ~0.4 MB) holds the weights,
+the config, the budget actually spent (CPU minutes of the process, wall minutes, learner
+decisions, updates), the learning curve and the library fingerprint. Deterministic for a seed (single torch thread).
 """
 from __future__ import annotations
 
@@ -117,7 +117,8 @@ def train(game, cfg: RLConfig, out: str | Path | None = None, progress: bool = T
     from igraph_fight.agents.common import EventReward, as_style
     from igraph_fight.agents.gametree import GameTreeAgent
     from igraph_fight.agents.human import HumanProxyAgent
-    from igraph_fight.agents.rl import RLAgent, load_checkpoint, make_network
+    from igraph_fight.agents.rl import RL_FORMAT, RL_VERSION, RLAgent, load_checkpoint, make_network
+    from igraph_fight.checkpoint import save_checkpoint
     from igraph_fight.agents.static import StaticAgent
     from igraph_fight.agents.base import RandomAgent
     from igraph_fight.graph import library_fingerprint
@@ -256,18 +257,15 @@ def train(game, cfg: RLConfig, out: str | Path | None = None, progress: bool = T
     if bar is not None:
         bar.close()
     ck = {
-        "format": "igraph-fight/rl-ppo", "version": 1, "state_dict": net.state_dict(), "config": asdict(cfg),
+        "format": RL_FORMAT, "version": RL_VERSION, "state_dict": net.state_dict(), "config": asdict(cfg),
         "obs_dim": obs_dim, "n_actions": A, "style": style.name, "library_fingerprint": library_fingerprint(game.library),
         "sim": game.tables.params.to_json(),
         "budget": {"cpu_minutes": (time.process_time() - t_cpu) / 60.0, "wall_minutes": (time.perf_counter() - t_wall) / 60.0,
                    "decisions": decisions, "updates": update, "stop": stop, "torch_threads": 1},
         "init_from": None if prior is None else {"path": str(cfg.init_from), "style": prior.get("style"),
                                                   "budget": prior.get("budget")},
-        "curve": curve, "torch_version": torch.__version__,
+        "curve": curve, "torch_version": str(torch.__version__),
     }
     if out is not None:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(str(out) + ".tmp")
-        torch.save(ck, str(tmp))
-        tmp.replace(out)
+        save_checkpoint(out, ck, RL_FORMAT, RL_VERSION)
     return ck

@@ -26,12 +26,11 @@ from pathlib import Path
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 
 from tracker.track.evaluation import draw_walks, walk_reference
 from tracker.body.humanoid import leg_mask
 from tracker.track.pd import PDController
-from tracker.track.policy_net import NumpyMLP, RunningNorm, Actor, load_policy
+from tracker.track.policy_net import NumpyMLP, RunningNorm, Actor, load_checkpoint, load_policy
 from tracker.track.reference import FootPenetration, Reference, ctrl_targets, site_positions
 from tracker.track.tracking_reward import RewardRef
 from tracker.learn.train_tracker import TrainConfig, Worker
@@ -174,7 +173,7 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, default=0.0, help="joint-velocity noise at the start (rad/s)")
     ap.add_argument("--out", default="")
     a = ap.parse_args(argv)
-    ck = torch.load(CKPT, weights_only=False)
+    ck = load_checkpoint(CKPT)
     cfg = TrainConfig.from_dict({**ck["config"], "init_noise": 0.0, "envs_per_worker": 1, "walks_per_worker": 1,
                                  "push_prob": 0.0})
     w = Worker(cfg, None, 0, a.seed)

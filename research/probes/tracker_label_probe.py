@@ -29,10 +29,9 @@ import time
 
 import mujoco
 import numpy as np
-import torch
 
 from tracker.body.humanoid import leg_mask
-from tracker.track.policy_net import Actor, NumpyMLP, RunningNorm
+from tracker.track.policy_net import Actor, NumpyMLP, RunningNorm, load_checkpoint
 from tracker.learn.train_tracker import TrainConfig, Worker
 
 SHIPPED = "tracker/checkpoints/boxing_cmu13.pt"
@@ -40,7 +39,7 @@ SHIPPED = "tracker/checkpoints/boxing_cmu13.pt"
 
 class Prober:
     def __init__(self, ckpt: str, seed: int, candidates: int) -> None:
-        ck = torch.load(ckpt, map_location="cpu", weights_only=False)
+        ck = load_checkpoint(ckpt)
         cfg = TrainConfig.from_dict(ck["config"])
         cfg.envs_per_worker, cfg.walks_per_worker, cfg.candidates = 1, 8, candidates
         self.cfg = cfg

@@ -28,6 +28,7 @@ import torch  # noqa: E402
 
 from tracker.track.evaluation import draw_walks, walk_reference
 from tracker.learn.train_tracker import TrainConfig, Worker
+from tracker.track.policy_net import load_checkpoint
 from research.probes.tracker_feasible_probe import CKPT, searched_trajectory  # noqa: E402
 
 #: Search std of the layer targets: offset (m), velocity (m/s), pelvis orientation (rad).
@@ -122,7 +123,7 @@ def main(argv=None) -> int:
         if a.out:
             Path(a.out).write_text(json.dumps(dict(vars(a), **res), indent=1))
         return 0
-    ck = torch.load(CKPT, weights_only=False)
+    ck = load_checkpoint(CKPT)
     cfg = TrainConfig.from_dict({**ck["config"], "init_noise": 0.0, "envs_per_worker": 1, "walks_per_worker": 1,
                                  "push_prob": 0.0})
     walks = draw_walks(Worker(cfg, None, 0, a.seed).src, max(a.walks) + 1, 20, a.seed)

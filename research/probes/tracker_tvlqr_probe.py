@@ -31,10 +31,9 @@ from pathlib import Path
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 
 from tracker.track.evaluation import draw_walks, walk_reference
-from tracker.track.policy_net import load_policy
+from tracker.track.policy_net import load_checkpoint, load_policy
 from tracker.learn.train_tracker import TrainConfig, Worker
 from research.probes.tracker_feasible_probe import CKPT, feasible_reference, searched_trajectory  # noqa: E402
 
@@ -143,7 +142,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-layer", action="store_true", help="search, linearise and run without the balance layer")
     ap.add_argument("--out", default="")
     a = ap.parse_args(argv)
-    ck = torch.load(CKPT, weights_only=False)
+    ck = load_checkpoint(CKPT)
     cfg = TrainConfig.from_dict({**ck["config"], "init_noise": 0.0, "envs_per_worker": 1, "walks_per_worker": 1,
                                  "push_prob": 0.0, **({"vf_gains": ()} if a.no_layer else {})})
     w = Worker(cfg, None, 0, a.seed)

@@ -17,6 +17,9 @@ import os
 import sys
 from pathlib import Path
 
+from igraph_fight.cli import (check_swap, depth, non_negative_int, positive_float, positive_int, probability, swap,
+                              user_error_line)
+
 #: the IG fighters' first-ply rules (igraph_fight.controller.FIRST_PLY) and the hit model's later plies
 #: (tracker.bouts.hit_model.FUTURES), checked when a command runs
 FIRST_PLY_HELP = "table (default), exact or exact2"
@@ -63,16 +66,15 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
     them; IGRAPH_FIGHT_TRACKER and IGRAPH_FIGHT_VIDEO=0 are the environment defaults)."""
     from tracker.bouts.run import run_physics_fight
     from tracker.bouts.setup import BoutConfig
-    swap = None
-    if getattr(args, "swap_a", None):
-        t, _, style = args.swap_a.partition(":")
-        swap = (float(t), style)
     video = getattr(args, "video", None)
     if video is None:
         video = os.environ.get("IGRAPH_FIGHT_VIDEO", "1") not in ("0", "false", "no")
     try:
+        if not args.seconds > 0:
+            raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+        swap_a = check_swap(getattr(args, "swap_a", None), args.seconds)
         summary = run_physics_fight(args.graph, args.a, args.b, args.depth_a, args.depth_b, args.seconds, args.seed,
-                                    args.out, library=args.library, swap_a=swap,
+                                    args.out, library=args.library, swap_a=swap_a,
                                     tracker=getattr(args, "tracker", None), video=video,
                                     video_fps=float(getattr(args, "video_fps", 15.0) or 15.0),
                                     root_assist=bool(getattr(args, "root_assist", False)),
@@ -81,7 +83,7 @@ def cmd_physics_fight(args: argparse.Namespace) -> int:
                                                       reset_place=getattr(args, "reset_place", "reference"),
                                                       reset_facing=getattr(args, "reset_facing", "opponent")))
     except (FileNotFoundError, ValueError) as e:
-        print(f"igraph-fight: error: {e}", file=sys.stderr)
+        print(user_error_line(e), file=sys.stderr)
         return 2
     if args.json:
         print(json.dumps(summary))
@@ -96,19 +98,19 @@ def add_fight_arguments(f: argparse.ArgumentParser, tracker_help: str = TRACKER_
     f.add_argument("--library", default=None)
     f.add_argument("--a", default="infighter", help=FIGHTER_HELP)
     f.add_argument("--b", default="outboxer")
-    f.add_argument("--depth-a", type=int, default=5)
-    f.add_argument("--depth-b", type=int, default=5)
-    f.add_argument("--swap-a", default=None, help="T:STYLE: fighter A switches to STYLE at T seconds")
-    f.add_argument("--seconds", type=float, default=60.0)
-    f.add_argument("--seed", type=int, default=1)
+    f.add_argument("--depth-a", type=depth, default=5)
+    f.add_argument("--depth-b", type=depth, default=5)
+    f.add_argument("--swap-a", type=swap, default=None, help="T:STYLE: fighter A switches to STYLE at T seconds")
+    f.add_argument("--seconds", type=positive_float, default=60.0)
+    f.add_argument("--seed", type=non_negative_int, default=1)
     f.add_argument("--out", default="out/fight")
     f.add_argument("--tracker", default=None, help=tracker_help)
     f.add_argument("--no-video", dest="video", action="store_false", default=True)
-    f.add_argument("--video-fps", type=float, default=15.0)
+    f.add_argument("--video-fps", type=positive_float, default=15.0)
     f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
     f.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     f.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
-    f.add_argument("--max-wall-s", type=float, default=None,
+    f.add_argument("--max-wall-s", type=positive_float, default=None,
                    help="stop after this many wall-clock seconds (slow trackers); the summary covers the seconds "
                    "simulated by then (its 'seconds'), per-minute figures divide by them")
     f.add_argument("--json", action="store_true")
@@ -119,11 +121,11 @@ def add_series_arguments(r: argparse.ArgumentParser, tracker_help: str = TRACKER
     r.add_argument("--graph", required=True)
     r.add_argument("--a", default="infighter", help=FIGHTER_HELP)
     r.add_argument("--b", default="outboxer")
-    r.add_argument("--depth-a", type=int, default=5)
-    r.add_argument("--depth-b", type=int, default=5)
-    r.add_argument("--bouts", type=int, default=10)
-    r.add_argument("--seconds", type=float, default=60.0)
-    r.add_argument("--seed0", type=int, default=0)
+    r.add_argument("--depth-a", type=depth, default=5)
+    r.add_argument("--depth-b", type=depth, default=5)
+    r.add_argument("--bouts", type=positive_int, default=10)
+    r.add_argument("--seconds", type=positive_float, default=60.0)
+    r.add_argument("--seed0", type=non_negative_int, default=0)
     r.add_argument("--tracker", default=None, help=tracker_help)
     r.add_argument("--root-assist", action="store_true")
     r.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
@@ -172,10 +174,10 @@ def cmd_rl_train(a: argparse.Namespace) -> int:
     try:
         kw = parse_overrides(a.set)
     except ValueError as exc:
-        print(f"igraph-fight tracker rl train: error: {exc}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker rl train: {exc}", file=sys.stderr)
         return 2
     if not (a.graph or a.library):
-        print("igraph-fight tracker rl train: error: --graph or --library is needed (where the actions come from)",
+        print("igraph-fight: error: tracker rl train: --graph or --library is needed (where the actions come from)",
               file=sys.stderr)
         return 2
     cfg = RLConfig(**{**asdict(RLConfig()), **kw})
@@ -192,7 +194,7 @@ def cmd_rl_eval(a: argparse.Namespace) -> int:
     from tracker.bouts.rl_eval import evaluate_vs_rl, split_styles
     for name, val, allowed in (("--first-ply", a.first_ply, FIRST_PLY), ("--future", a.future, FUTURES)):
         if val not in allowed:
-            print(f"igraph-fight tracker rl eval: error: {name} {val!r}: one of {', '.join(allowed)}", file=sys.stderr)
+            print(f"igraph-fight: error: tracker rl eval: {name} {val!r}: one of {', '.join(allowed)}", file=sys.stderr)
             return 2
     res = evaluate_vs_rl(a.graph, a.rl, split_styles(a.styles), a.bouts, a.seconds, a.depth, a.tracker, a.library,
                          seed0=a.seed0, root_assist=a.root_assist, log=lambda s: print(s, flush=True),
@@ -216,10 +218,10 @@ def add_rl_eval_arguments(e: argparse.ArgumentParser, tracker_help: str = TRACKE
     e.add_argument("--styles", default="infighter,outboxer",
                    help="comma-separated IG styles; STYLE+close[=R,THETA][:avoid=A,B,...]: closes in by a geometric "
                    "rule until engaged (igraph_fight.closing)")
-    e.add_argument("--bouts", type=int, default=10)
-    e.add_argument("--seconds", type=float, default=60.0)
-    e.add_argument("--depth", type=int, default=5)
-    e.add_argument("--seed0", type=int, default=0, help="first bout's seed (bouts use seed0, seed0+1, ...)")
+    e.add_argument("--bouts", type=positive_int, default=10)
+    e.add_argument("--seconds", type=positive_float, default=60.0)
+    e.add_argument("--depth", type=depth, default=5)
+    e.add_argument("--seed0", type=non_negative_int, default=0, help="first bout's seed (bouts use seed0, seed0+1, ...)")
     e.add_argument("--first-ply", default="table",
                    help=f"the IG fighters' first plies (igraph_fight.controller.NPCController): {FIRST_PLY_HELP}")
     e.add_argument("--hit-model", nargs="?", const="default", default=None, metavar="MODEL",
@@ -227,7 +229,7 @@ def add_rl_eval_arguments(e: argparse.ArgumentParser, tracker_help: str = TRACKE
                         "no value: the shipped tracker/checkpoints/hit_model_cmu13.pt)")
     e.add_argument("--future", default="calibrated",
                    help=f"with --hit-model: the later plies' values (tracker.bouts.hit_model.phys_fighter): {FUTURE_HELP}")
-    e.add_argument("--workers", type=int, default=1, help="processes playing the bouts (same results)")
+    e.add_argument("--workers", type=positive_int, default=1, help="processes playing the bouts (same results)")
     e.add_argument("--root-assist", action="store_true")
     e.add_argument("--out", default=None, help="write the result as JSON")
 
@@ -243,7 +245,7 @@ def add_rl_commands(sub) -> None:
     t.add_argument("--graph", default=None, help="graph file whose embedded library gives the actions")
     t.add_argument("--library", default=None)
     t.add_argument("--tracker", required=True, help="tracking policy checkpoint (or 'pd')")
-    t.add_argument("--minutes", type=float, default=75.0)
+    t.add_argument("--minutes", type=positive_float, default=75.0)
     t.add_argument("--out", required=True)
     t.add_argument("--resume", default=None)
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override an RLConfig field")
@@ -266,7 +268,7 @@ def cmd_hit_model(args: argparse.Namespace) -> int:
     from tracker.learn.train_hit_model import HitModelConfig, collect, kind_table, load_data, plot_report, train
     if args.cmd == "collect":
         if args.future not in FUTURES:
-            print(f"igraph-fight tracker hit-model collect: error: --future {args.future!r}: one of "
+            print(f"igraph-fight: error: tracker hit-model collect: --future {args.future!r}: one of "
                   f"{', '.join(FUTURES)}", file=sys.stderr)
             return 2
         r = collect(args.graph, args.bouts, args.out, args.seconds, args.seed0, args.explore, args.workers,
@@ -276,7 +278,7 @@ def cmd_hit_model(args: argparse.Namespace) -> int:
     try:
         parts = [load_data(p) for p in args.data]
     except ValueError as e:
-        print(f"igraph-fight tracker hit-model {args.cmd}: error: {e}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker hit-model {args.cmd}: {e}", file=sys.stderr)
         return 2
     if args.cmd == "kinds":
         from igraph_fight.graph import load_graph
@@ -298,7 +300,7 @@ def cmd_hit_model(args: argparse.Namespace) -> int:
     try:
         cfg = HitModelConfig(**parse_config_overrides(args.set, HitModelConfig))
     except ValueError as exc:
-        print(f"igraph-fight tracker hit-model train: error: {exc}", file=sys.stderr)
+        print(f"igraph-fight: error: tracker hit-model train: {exc}", file=sys.stderr)
         return 2
     model, report = train(data, cfg)
     model.save(args.out)
@@ -317,11 +319,11 @@ def add_hit_model_commands(sub) -> None:
     hs.required = True
     c = hs.add_parser("collect", help="play exploring physics bouts and write hit samples")
     c.add_argument("--graph", required=True)
-    c.add_argument("--bouts", type=int, default=200)
-    c.add_argument("--seconds", type=float, default=60.0)
-    c.add_argument("--seed0", type=int, default=1000)
-    c.add_argument("--explore", type=float, default=0.4)
-    c.add_argument("--workers", type=int, default=2)
+    c.add_argument("--bouts", type=positive_int, default=200)
+    c.add_argument("--seconds", type=positive_float, default=60.0)
+    c.add_argument("--seed0", type=non_negative_int, default=1000)
+    c.add_argument("--explore", type=probability, default=0.4)
+    c.add_argument("--workers", type=positive_int, default=2)
     c.add_argument("--tracker", default=None, help=TRACKER_HELP)
     c.add_argument("--rl", default=None)
     c.add_argument("--hit-model", default=None, help="IG fighters use this hit model (a further data round)")

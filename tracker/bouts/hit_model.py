@@ -44,6 +44,9 @@ import numpy as np
 from igraph_fight.agents.ig import IGAgent
 
 DEFAULT_HIT_MODEL = Path(__file__).resolve().parent.parent / "checkpoints" / "hit_model_cmu13.pt"
+#: the model file's format and version (igraph_fight.checkpoint; tracker/checkpoints/README.md)
+HIT_MODEL_FORMAT = "igraph-fight/hit-model"
+HIT_MODEL_VERSION = 1
 
 #: kinematic features taken from NPCController.menu_terms' raw sim.FT_* columns
 FT_USED = (0, 1, 2, 3, 4, 5, 6, 7, 9, 10, 11, 12, 14, 15)
@@ -101,10 +104,10 @@ class HitModel:
         return expit(h)
 
     def save(self, path: str | os.PathLike) -> None:
-        import torch
-        from motion_graph.atomic import atomic_write
+        """Write the model atomically (igraph_fight.checkpoint, HIT_MODEL_FORMAT)."""
+        from igraph_fight.checkpoint import save_checkpoint
         ck = {"model": self.net.state_dict(), "mean": self.mean, "std": self.std, "meta": self.meta}
-        atomic_write(Path(path), lambda fh: torch.save(ck, fh))
+        save_checkpoint(path, ck, HIT_MODEL_FORMAT, HIT_MODEL_VERSION)
 
 
 def hit_network(n_in: int, hidden: tuple):
@@ -120,16 +123,17 @@ def hit_network(n_in: int, hidden: tuple):
 
 def load_hit_model(path: str | os.PathLike | None = None) -> HitModel:
     """A trained hit model (default: the shipped tracker/checkpoints/hit_model_cmu13.pt)."""
-    import torch
+    from igraph_fight.checkpoint import CheckpointError, load_checkpoint
     p = Path(path) if path else DEFAULT_HIT_MODEL
     if not p.is_file():
         raise FileNotFoundError(f"no hit model at {p} (train one: igraph-fight tracker hit-model collect ... ; train ...)")
+    ck = load_checkpoint(p, HIT_MODEL_FORMAT, (HIT_MODEL_VERSION,), what="hit model")
     try:
-        ck = torch.load(p, map_location="cpu", weights_only=False)
         net = hit_network(int(ck["meta"]["n_in"]), tuple(ck["meta"]["hidden"]))
         net.load_state_dict(ck["model"])
     except Exception as e:  # a clear error naming the file, not a traceback from inside torch
-        raise ValueError(f"{p}: not a hit model checkpoint ({type(e).__name__}: {e})") from None
+        raise CheckpointError(str(p), f"not a hit model checkpoint ({type(e).__name__}: "
+                                      f"{str(e).strip().splitlines()[0] if str(e).strip() else ''})") from None
     net.eval()
     return HitModel(net, np.asarray(ck["mean"]), np.asarray(ck["std"]), dict(ck["meta"]))
 

@@ -38,6 +38,9 @@ from torch import nn
 
 #: The checkpoint shipped with the repository (trained against the CMU boxing library, 68 actions).
 DEFAULT_RL_CKPT = Path(__file__).resolve().parent.parent / "checkpoints" / "physics_rl_cmu13.pt"
+#: the checkpoint's format and version (igraph_fight.checkpoint; tracker/checkpoints/README.md)
+RL_CKPT_FORMAT = "igraph-fight/physics-rl"
+RL_CKPT_VERSION = 1
 
 N_PHYS = 14   # PhysicsBout.features
 
@@ -170,7 +173,10 @@ class PhysicsRLAgent:
 
 
 def load_rl_checkpoint(path: str | os.PathLike) -> dict:
-    return torch.load(str(path), map_location="cpu", weights_only=False)
+    """A physics RL checkpoint, read weights-only with its format checked (igraph_fight.checkpoint);
+    a CheckpointError naming the file otherwise."""
+    from igraph_fight.checkpoint import load_checkpoint
+    return load_checkpoint(path, RL_CKPT_FORMAT, (RL_CKPT_VERSION,), what="physics RL")
 
 
 def load_rl_agent(path: str | os.PathLike | None, library, sample: bool = True) -> PhysicsRLAgent:

@@ -195,14 +195,13 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     ``resume``: continue a checkpoint (weights, optimiser, normaliser, curriculum, budget)."""
     import torch
 
-    from motion_graph.atomic import atomic_write
+    from igraph_fight.checkpoint import save_checkpoint
     from tracker.track.walks import default_library
     torch.set_num_threads(1)
     prior = None
     if resume:
-        prior = torch.load(resume, map_location="cpu", weights_only=True)
-        if prior.get("format") != FORMAT:
-            raise ValueError(f"{resume}: not an assisted-tracker checkpoint")
+        from igraph_fight.checkpoint import load_checkpoint
+        prior = load_checkpoint(resume, FORMAT, (VERSION,), "assisted-tracker checkpoint")
         cfg = AssistedTrainConfig.from_dict({**asdict(cfg), **prior["config"]})
     torch.manual_seed(cfg.seed + (prior["budget"]["runs"] if prior else 0))
     if library:
@@ -244,12 +243,12 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     def save() -> None:
         budget["cpu_s"] = cpu_base + time.process_time() - cpu0
         budget["wall_s"] = wall_base + time.perf_counter() - wall0
-        ck = {"format": FORMAT, "version": VERSION, "actor": actor.state_dict(), "critic": critic.state_dict(),
-              "optimizer": opt.state_dict(), "obs_mean": torch.tensor(norm.mean), "obs_var": torch.tensor(norm.var),
+        ck = {"actor": actor.state_dict(), "critic": critic.state_dict(),
+              "optimizer": opt.state_dict(), "obs_mean": norm.mean, "obs_var": norm.var,
               "obs_count": float(norm.count), "config": _plain(asdict(cfg)), "cap": float(roll.cap),
               "budget": dict(budget), "curve": curve, "completions": completions[-cfg.curriculum_window:],
-              "torch_version": str(torch.__version__)}
-        atomic_write(out, lambda fh: torch.save(ck, fh))
+              "torch_version": torch.__version__}
+        save_checkpoint(out, ck, FORMAT, VERSION)
         plot_curve(curve, str(out) + ".png")
 
     while True:

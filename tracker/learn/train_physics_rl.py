@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -22,10 +21,12 @@ import numpy as np
 import torch
 from torch import nn
 
+from igraph_fight.checkpoint import save_checkpoint
 from igraph_fight.learn import ppo
 
 from tracker.bouts.loaders import bout_library
-from tracker.bouts.rl_agent import N_PHYS, ActorCritic, PhysicsRLAgent, RLConfig, load_rl_checkpoint
+from tracker.bouts.rl_agent import (N_PHYS, RL_CKPT_FORMAT, RL_CKPT_VERSION, ActorCritic, PhysicsRLAgent, RLConfig,
+                                    load_rl_checkpoint)
 
 
 def parse_overrides(items: list[str] | None) -> dict:
@@ -165,6 +166,7 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
     and ``out``.png. ``resume`` continues a checkpoint: weights, optimiser, opponent pool, budget."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
+    ck = load_rl_checkpoint(resume) if resume else None     # a refused file fails before the workers start
     ctx = mp.get_context("spawn")
     pipes, procs = [], []
     for w in range(cfg.n_workers):
@@ -179,14 +181,13 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     history: list[dict] = []
     budget = {"decisions": 0, "sim_s": 0.0, "wall_s": 0.0, "worker_cpu_s": 0.0, "bouts": 0, "iterations": 0}
-    if resume:
-        ck = load_rl_checkpoint(resume)
+    if ck is not None:
         net.load_state_dict(ck["model"])
         if "optimizer" in ck:
             opt.load_state_dict(ck["optimizer"])
         history = list(ck.get("history", []))
         budget = dict(ck.get("budget", budget))
-    pool: list[dict] = list(ck.get("pool", [])) if resume else []
+    pool: list[dict] = list(ck.get("pool", [])) if ck is not None else []
     lib_info = _lib_info(graph, library)
     t_start = time.time()
     wall0 = budget["wall_s"]
@@ -198,9 +199,7 @@ def train(graph: str | None, tracker: str, out: str, minutes: float, cfg: RLConf
         ck = {"model": net.state_dict(), "optimizer": opt.state_dict(), "config": asdict(cfg), "obs_dim": obs_dim,
               "n_actions": A, "history": history, "budget": budget, "library": lib_info,
               "tracker": str(tracker), "final": final, "pool": pool}
-        tmp = str(out) + ".tmp"
-        torch.save(ck, tmp)
-        os.replace(tmp, out)
+        save_checkpoint(out, ck, RL_CKPT_FORMAT, RL_CKPT_VERSION)
 
     bar = None
     if progress:

@@ -41,7 +41,8 @@ from igraph_fight.learn.ppo import clipped_policy_loss, gae, normalise
 
 from tracker.learn.overrides import parse_config_overrides
 from tracker.learn.search_labels import LabelBuffer, distill, labels_path, search_labels
-from tracker.track.policy_net import Actor, Critic, RunningNorm, load_checkpoint, policy_observation
+from tracker.track.policy_net import (Actor, Critic, RunningNorm, load_checkpoint, policy_observation,
+                                      save_policy_checkpoint)
 from tracker.track.tracking_reward import RewardRef, tracking_reward
 
 
@@ -566,17 +567,13 @@ def save_checkpoint(path: str | os.PathLike, learner: Learner, cfg: TrainConfig,
                     history: list, slim: bool = False) -> None:
     """Write the checkpoint atomically (slim: the policy only, no critic / optimizer)."""
     ck = {"policy": learner.cpu_actor_state(), **learner.norm.state(), "config": asdict(cfg),
-          "library": library, "budget": {k: v for k, v in budget.items() if not k.startswith("_")}, "history": list(history), "format": "igraph-fight-policy-1"}
+          "library": library, "budget": {k: v for k, v in budget.items() if not k.startswith("_")}, "history": list(history)}
     ck["lr_actor"] = learner.lr_actor
     if not slim:
         ck["value"] = {k: v.detach().cpu() for k, v in learner.critic.state_dict().items()}
         ck["optimizer"] = learner.opt.state_dict()
         ck["actor_optimizer"] = learner.actor_opt.state_dict()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(ck, str(tmp))
-    os.replace(tmp, path)
+    save_policy_checkpoint(path, ck)
 
 
 def plot_curve(history: list, path: str | os.PathLike, title: str = "") -> None:
@@ -836,6 +833,6 @@ def main_args(args, worker_cls: type = Worker) -> int:
         ck = load_checkpoint(args.out)
         ck.pop("optimizer", None)
         slim = Path(args.out).with_name(Path(args.out).stem + "-slim.pt")
-        torch.save(ck, str(slim))
+        save_policy_checkpoint(slim, ck)
         print(f"wrote {slim} (policy, critic, normaliser; no optimizer state: a resume restarts Adam)")
     return 0

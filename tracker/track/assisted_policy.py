@@ -9,7 +9,7 @@ Inference is a numpy forward pass of the actor's mean (no torch per step). ``ass
 plays the same policy with its wrench ignored (the env's assist mode must then be "none"): the
 pure-physics figure.
 
-Checkpoint (a dict torch.load(weights_only=True) reads: tensors, numbers, strings, lists, dicts):
+Checkpoint (igraph_fight.checkpoint: read weights-only, no code runs from the file):
 ``format`` "igraph-fight/assisted-tracker", ``version`` 1, ``actor`` (state dict), ``obs_mean`` /
 ``obs_var`` (tensors), ``config`` (the training config), ``cap`` (the assist cap it ends at),
 ``budget`` (samples, CPU seconds), ``curve`` (learning curve rows); a resumable training
@@ -22,15 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from igraph_fight.checkpoint import CheckpointError, load_checkpoint
+
 FORMAT = "igraph-fight/assisted-tracker"
 VERSION = 1
 #: The checkpoint shipped with the repository (trained on the CMU boxing library).
 DEFAULT_ASSISTED_CKPT = Path(__file__).resolve().parent.parent / "checkpoints" / "assisted_cmu13.pt"
 N_ASSIST = 6
-
-
-class CheckpointError(ValueError):
-    """A policy checkpoint is missing, of another format or version, or does not fit the body."""
 
 
 def mlp_forward(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
@@ -67,11 +65,8 @@ class AssistedController:
     physics_hz = 120.0
 
     def __init__(self, ckpt: dict, path: str = "", assist_off: bool = False) -> None:
-        if ckpt.get("format") != FORMAT:
-            raise CheckpointError(f"{path or 'checkpoint'}: not an assisted-tracker checkpoint (format {ckpt.get('format')!r})")
-        if int(ckpt.get("version", -1)) != VERSION:
-            raise CheckpointError(f"{path or 'checkpoint'}: assisted-tracker version {ckpt.get('version')}, "
-                                  f"this build reads {VERSION}")
+        if ckpt.get("format") != FORMAT or int(ckpt.get("version", -1)) != VERSION:
+            raise CheckpointError(path or "checkpoint", f"not an assisted-tracker checkpoint of version {VERSION}")
         self.path = path
         self.config = dict(ckpt["config"])
         self.layers = actor_layers(ckpt["actor"])
@@ -92,7 +87,7 @@ class AssistedController:
     def reset(self, env) -> None:
         from tracker.track.pd import PDTracker
         if env.n_act != self.n_act:
-            raise CheckpointError(f"{self.path}: the policy drives {self.n_act} actuators, the body has {env.n_act}")
+            raise CheckpointError(self.path, f"the policy drives {self.n_act} actuators, the body has {env.n_act}")
         PDTracker(class_scale=self.gain_scale).reset(env)
 
     def assist_config(self):
@@ -104,7 +99,7 @@ class AssistedController:
         """(B, act_dim) deterministic output for observations (B, obs_dim)."""
         x = np.atleast_2d(obs)
         if x.shape[1] != self.obs_dim:
-            raise CheckpointError(f"{self.path}: observation has {x.shape[1]} numbers, the policy expects {self.obs_dim}")
+            raise CheckpointError(self.path, f"observation has {x.shape[1]} numbers, the policy expects {self.obs_dim}")
         z = np.clip((x - self.obs_mean) / self.obs_std, -10.0, 10.0)
         out = mlp_forward(self.layers, z)
         out[:, self.n_act:] += x[:, -N_ASSIST:] * self.assist_gain     # the fixed PD's wrench as the prior
@@ -126,16 +121,10 @@ class AssistedController:
 
 
 def load_assisted(path: str | os.PathLike | None = None, assist_off: bool = False) -> AssistedController:
-    """An AssistedController from a checkpoint file (default: the shipped one); torch reads it with
-    weights_only=True (no code runs from the file)."""
-    import torch
+    """An AssistedController from a checkpoint file (default: the shipped one), read weights-only
+    (igraph_fight.checkpoint.load_checkpoint: no code runs from the file)."""
     p = Path(path) if path else DEFAULT_ASSISTED_CKPT
     if not p.is_file():
-        raise CheckpointError(f"no assisted-tracker checkpoint at {p} (train one: igraph-fight tracker train-assisted)")
-    try:
-        ck = torch.load(str(p), map_location="cpu", weights_only=True)
-    except Exception as e:  # a damaged or hostile file: one line, no traceback
-        raise CheckpointError(f"{p}: not a loadable checkpoint ({type(e).__name__}: {str(e)[:80]})") from None
-    if not isinstance(ck, dict):
-        raise CheckpointError(f"{p}: not an assisted-tracker checkpoint")
+        raise CheckpointError(str(p), "no assisted-tracker checkpoint here (train one: igraph-fight tracker train-assisted)")
+    ck = load_checkpoint(p, FORMAT, (VERSION,), "assisted-tracker checkpoint")
     return AssistedController(ck, str(p), assist_off=assist_off)

@@ -14,7 +14,8 @@
   the root.
 - Inference is a numpy forward pass of the MLP (no torch call per step): a few microseconds.
 
-Checkpoint (torch.save dict): ``policy`` (state dict), ``obs_mean``/``obs_var`` (normaliser),
+Checkpoint (igraph_fight.checkpoint, format POLICY_FORMAT version POLICY_VERSION: read
+weights-only): ``policy`` (state dict), ``obs_mean``/``obs_var`` (normaliser, float64 tensors),
 ``config`` (tracker.learn.train_tracker.TrainConfig as a dict), ``library`` (fingerprint of the action library
 trained on), ``budget`` (samples, CPU seconds, wall seconds), ``history`` (learning curve); a
 resumable training checkpoint also has ``value`` and ``optimizer``.
@@ -33,6 +34,9 @@ from tracker.body.frames import facing_rotation, ground_yaw, quat_matrix
 
 #: The checkpoint shipped with the repository (trained on the CMU boxing library, 13_17 + 13_18).
 DEFAULT_CKPT = Path(__file__).resolve().parent.parent / "checkpoints" / "boxing_cmu13.pt"
+#: the policy checkpoint's format and version (igraph_fight.checkpoint; tracker/checkpoints/README.md)
+POLICY_FORMAT = "igraph-fight/tracker-policy"
+POLICY_VERSION = 2
 
 
 def mlp(sizes: list[int], act=nn.ELU) -> nn.Sequential:
@@ -311,18 +315,26 @@ class LearnedController:
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict:
-    return torch.load(str(path), map_location="cpu", weights_only=False)
+    """A policy checkpoint, read weights-only with its format checked (igraph_fight.checkpoint);
+    a CheckpointError naming the file otherwise."""
+    from igraph_fight.checkpoint import load_checkpoint as load_versioned
+    return load_versioned(path, POLICY_FORMAT, (POLICY_VERSION,), what="tracking policy")
+
+
+def save_policy_checkpoint(path: str | os.PathLike, ck: dict) -> None:
+    """Write a policy checkpoint atomically in POLICY_FORMAT (numpy arrays stored as tensors)."""
+    from igraph_fight.checkpoint import save_checkpoint
+    save_checkpoint(path, ck, POLICY_FORMAT, POLICY_VERSION)
 
 
 def offset_checkpoint(src: str | os.PathLike, dst: str | os.PathLike, offset_rad: float) -> None:
     """Write to ``dst`` the checkpoint ``src`` with its policy's output bias set to ``offset_rad``
     on every joint: a policy that adds that offset to every PD target. A deliberately wrong start
     for tests and benchmarks of the training loop (it must find a clear improvement)."""
-    from motion_graph.atomic import atomic_write
     ck = load_checkpoint(src)
     last_bias = [k for k in ck["policy"] if k.startswith("mu.") and k.endswith(".bias")][-1]
     ck["policy"][last_bias] = torch.full_like(ck["policy"][last_bias], float(offset_rad))
-    atomic_write(dst, lambda fh: torch.save(ck, fh))
+    save_policy_checkpoint(dst, ck)
 
 
 def load_policy(path: str | os.PathLike | None = None) -> LearnedController:

@@ -125,7 +125,7 @@ def test_protocol_reports_the_assist(setup):
     from tracker.track.batch_env import BatchConfig
     from tracker.track.evaluation import draw_walks
     from tracker.track.pd import STANCE_GAINS, PDTracker
-    from tracker.track.protocol import run_walks, summarise
+    from tracker.track.walk_protocol import run_walks, summarise
     walks = draw_walks(setup.source, 2, 3, 0)
     cfg = BatchConfig(assist=AssistConfig("fixed", 0.5))
     ctrl = PDTracker(class_scale=STANCE_GAINS)

@@ -171,7 +171,7 @@ def cmd_eval(args) -> int:
 
 
 def _eval_batched(args) -> int:
-    """`tracker eval --assist ...`: the walk protocol on the batched env (tracker.track.protocol)."""
+    """`tracker eval --assist ...`: the walk protocol on the batched env (tracker.track.walk_protocol)."""
     from dataclasses import replace
 
     from tracker.track.assist import AssistConfig
@@ -179,7 +179,7 @@ def _eval_batched(args) -> int:
     from tracker.track.batch_env import BatchConfig
     from tracker.track.evaluation import draw_walks, make_setup
     from tracker.track.pd import STANCE_GAINS, PDTracker, batched_model_options
-    from tracker.track.protocol import format_summary, run_walks, summarise
+    from tracker.track.walk_protocol import format_summary, run_walks, summarise
     from tracker.track.walks import walk_source
     assist = args.assist or "learned"
     name = "learned" if args.controller in ("learned", "assisted") else args.controller

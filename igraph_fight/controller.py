@@ -55,6 +55,7 @@ from __future__ import annotations
 import threading
 import time
 import types
+from collections import ChainMap
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -471,7 +472,9 @@ class NPCController:
         graph.check_library(library)
         self.library = library
         a = graph.arrays
-        self._arrays = dict(a)
+        # the graph's arrays with this controller's overrides on top (a compact file's arrays are
+        # decoded on first use: only those the policy reads)
+        self._arrays = ChainMap({}, a)
         if "kinds_table" not in self._arrays:
             self._arrays["kinds_table"] = np.array(KINDS)
         for k, v in (edge_features or {}).items():
@@ -592,6 +595,25 @@ class NPCController:
     def action_kinds(self) -> np.ndarray:
         """Kind index of each library action (into ``kind_names``; -1 for none)."""
         return self._kinds
+
+    @property
+    def edge_scores(self) -> np.ndarray:
+        """The live table's score of every edge for the controlled fighter deciding (E,) float32:
+        W_me + gamma * V_next(target), what a table decision compares among legal edges."""
+        return self._table.q_me
+
+    @property
+    def locate_params(self) -> dict:
+        """What the nearest-state search computes with: f0, inv_sr2 = 1 / s_r^2, inv_st2 =
+        1 / s_theta^2, the linking tolerances tol_r (m) and tol_theta (rad), and the state key's
+        factors key_a1 = A + 1 and mask_mod (key = (Next-set id * key_a1 + M_other) * mask_mod + mask)."""
+        return {"f0": self.f0, "inv_sr2": self._inv_sr2, "inv_st2": self._inv_st2, "tol_r": self.tol_r,
+                "tol_theta": self.tol_theta, "key_a1": int(self._key_args[0]), "mask_mod": int(self._key_args[1])}
+
+    @property
+    def nextset_of(self) -> np.ndarray:
+        """Next-set id of every library action (A,) (igraph_fight.locate.nextset_ids)."""
+        return self._nextset_of
 
     @property
     def packed_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -48,8 +48,9 @@ def run_demo(mocap: str | None = None, out: str | Path = "out/demo", seed: int =
 
     t = time.perf_counter()
     options = replace(BuildOptions(), max_samples=max_samples, seed_bouts=DEMO_SEED_BOUTS)
-    graph, rep = build_graph(lib, options, seed, workers=0, checkpoint_dir=out / "graph.igz.ckpt", progress=progress)
-    graph.save(out / "graph.igz")
+    # the graph file is written before the checkpoint goes: a kill during the write resumes
+    graph, rep = build_graph(lib, options, seed, workers=0, checkpoint_dir=out / "graph.igz.ckpt", progress=progress,
+                             out=out / "graph.igz")
     timings["build_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

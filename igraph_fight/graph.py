@@ -1,24 +1,50 @@
 """The Interaction Graph: arrays, the versioned graph file, summaries and export.
 
-File (``.igz``): an uncompressed .npz holding the arrays below and ``header`` (JSON bytes):
-format, version, created (UTC timestamp), package version, library fingerprint and summary,
-build options, seed, build report, ``content_hash`` (sha256 over the state, edge and edge-feature
-arrays; no timestamps) and ``checksum``. Written atomically (motion_graph.atomic).
+File (``.igz``): the arrays below and a JSON header: format, version, created (UTC timestamp),
+package version, library fingerprint and summary, build options, seed, build report,
+``content_hash`` and ``checksum``. Written atomically (motion_graph.atomic).
 
-Versions: 2 (written now): ``checksum`` is sha256 over the header's JSON without ``checksum``
-(keys sorted, compact) and every array, so the header is covered too. 1 (read still): sha256
-over every array only. A sha256 anyone can recompute detects corruption, not tampering: what
-makes a file safe to use is that ``load`` also checks every value (``validate``).
+``content_hash`` (every version, the same for one graph in any version): sha256 over the arrays
+of ALL_ARRAYS in sorted name order, each as its name, its canonical dtype (ALL_ARRAYS: e.g.
+``float64``), its shape and its little-endian bytes in that dtype; no timestamps, no header,
+not the embedded library. A file's storage (narrowed integers, tables, derived arrays,
+compression) does not enter it: the arrays are hashed as they are in memory after loading.
+
+Versions:
+
+- 3 (written now, "compact"): the container of igraph_fight.graph_compact: an index (the header
+  with a ``members`` entry per array) and 64-byte aligned blobs. The continuous float arrays
+  (COMPACT_MAPPED) are stored as they are and memory-mapped; integer arrays narrowed to the
+  smallest integer dtype holding their values and deflated; float arrays with few distinct values
+  (durations, damages, defences, state snapping) as a table of those values and uint8 / uint16
+  codes, deflated; ``state_offsets`` as its differences; ``edge_snap_r`` and ``edge_snap_theta``
+  as the formulas of DERIVED (how the builder computes them from the landing) plus the values
+  where the formula differs in any bit. Every encoding is exact: the arrays decode to the same
+  bits. ``checksum`` is sha256 over the index's JSON without ``checksum`` (keys sorted,
+  compact), which holds every blob's CRC-32; ``load`` checks both.
+- 2 (read still; ``save(version=2)`` writes it): an uncompressed .npz of the arrays and
+  ``header``; ``checksum`` is sha256 over the header's JSON without ``checksum`` and every array.
+- 1 (read still): the .npz of version 2 whose checksum covers the arrays only.
+
+``igraph-fight graph convert OLD NEW`` rewrites a version 1 or 2 file as version 3. A checksum
+anyone can recompute detects corruption, not tampering: what makes a file safe to use is that
+``load`` also checks every value (``validate``).
 
 ``load`` reads without trusting the file and raises GraphFormatError (a LibraryFormatError) whose
-one-line message names the file and the field. Before anything is inflated, the zip and .npy
-headers (motion_graph.library.read_npz): every member's declared size equal to what its .npy
-shape and dtype need, all together no more than the file's size plus 1 MiB, a header of at most
-HEADER_MAX_BYTES. Then the checksum. Then ``validate``: the header's fields and build options
+one-line message names the file and the field. Before anything is inflated: for versions 1 and
+2, the zip and .npy headers (motion_graph.library.read_npz): every member's declared size equal
+to what its .npy shape and dtype need, all together no more than the file's size plus 1 MiB, a
+header of at most HEADER_MAX_BYTES; for version 3, the index (at most HEADER_MAX_BYTES of strict
+JSON) and every member spec: blobs inside the file, dtypes and shapes as ALL_ARRAYS says, what
+decoding allocates at most graph_compact.MAX_INFLATION times the file's size. Then the checksum
+(and version 3's CRC-32s). Then ``validate``: the header's fields and build options
 type- and range-checked (unknown option keys refused), every index array within the arrays it
 indexes, every float finite and in range, and, with the embedded library (validated as
 motion_graph.library.load_library does), every action, frame, mask, Next-set, menu and kind
-consistent with it. A graph that loads is safe for the numba kernels.
+consistent with it. A graph that loads is safe for the numba kernels. Version 3's validation
+reads the stored form (the narrowed integers, the tables' values, the derived arrays'
+exceptions: the same values); the arrays other than the memory-mapped ones are decoded on first
+access (graph_compact.GraphArrays).
 
 Arrays follow docs/contracts.md. States (S,), from the decider's perspective:
 ``state_r`` (m), ``state_theta_self``, ``state_theta_other`` (rad), ``state_m_self`` (a
@@ -48,13 +74,18 @@ from motion_graph.rotations import wrap_angle
 from motion_graph.atomic import atomic_write, kill_point
 from motion_graph.errors import LibraryFormatError
 
+from igraph_fight import graph_compact as gc
+from igraph_fight.graph_compact import GraphArrays, Member
+
 if TYPE_CHECKING:
     from motion_graph.library import ActionLibrary
 
 FORMAT = "igraph-fight/interaction-graph"
-VERSION = 2
+VERSION = 3
 #: versions ``load`` reads (see the module docstring for their checksum rules)
-READABLE_VERSIONS = (1, 2)
+READABLE_VERSIONS = (1, 2, 3)
+#: versions ``save`` writes
+WRITABLE_VERSIONS = (2, 3)
 #: the largest JSON header of a graph file, bytes
 HEADER_MAX_BYTES = 4 << 20
 #: states and edges a graph may hold (planner packs 2 * target + swap into an int32)
@@ -76,6 +107,33 @@ EDGE_ARRAYS = {
     "edge_snap_r": np.float64, "edge_snap_theta": np.float64,
 }
 ALL_ARRAYS = {"state_offsets": np.int64, **STATE_ARRAYS, **EDGE_ARRAYS}
+
+
+def _snap_r(a) -> np.ndarray:
+    """edge_snap_r as the builder computes it (igraph_fight.build.edges.link): |landing r - target r|."""
+    return np.abs(a["feat_r"] - a["state_r"][a["edge_target"]])
+
+
+def _snap_theta(a) -> np.ndarray:
+    """edge_snap_theta as the builder computes it from the landing's angles, seen by whoever decides
+    there (the features' self and other swapped after a swap edge); exact where the landing's
+    angles are the features' (the decider does not change), the file keeps the other values."""
+    t = a["edge_target"]
+    sw = a["edge_swap"].astype(bool)
+    c1 = np.where(sw, a["feat_theta_other"], a["feat_theta_self"])
+    c2 = np.where(sw, a["feat_theta_self"], a["feat_theta_other"])
+    return np.maximum(np.abs(wrap_angle(c1 - a["state_theta_self"][t])),
+                      np.abs(wrap_angle(c2 - a["state_theta_other"][t])))
+
+
+#: version 3: arrays stored as formulas of the others (plus the values where they differ)
+DERIVED = {"edge_snap_r": _snap_r, "edge_snap_theta": _snap_theta}
+#: version 3: float arrays stored as they are and memory-mapped (continuous values: compression
+#: gains little and would cost a copy)
+COMPACT_MAPPED = ("state_r", "state_theta_self", "state_theta_other", "feat_r", "feat_r_mean", "feat_theta_self",
+                  "feat_theta_other", "library_npz")
+#: version 3: arrays stored as they are and read into memory (indices the numba kernels follow)
+COMPACT_COPIED = ("edge_target",)
 #: float arrays in [0, 1e6) (distances, durations, counts), angles (rad, within [-pi, pi]) and
 #: damages (within +-1e12); every float array must be finite
 NON_NEGATIVE = ("state_r", "state_snap_r", "state_snap_theta", "feat_duration", "feat_r", "feat_r_mean",
@@ -133,10 +191,13 @@ def canonical_header(header: dict) -> bytes:
 
 def graph_checksum(header: dict, arrays: dict[str, np.ndarray], version: int = VERSION) -> str:
     """The ``checksum`` a graph file of ``version`` records for this header and these arrays:
-    sha256 over canonical_header(header) (version 2 only) and every array (name, dtype, shape, bytes)."""
+    sha256 over canonical_header(header) (versions 2 and 3) and, up to version 2, every array
+    (name, dtype, shape, bytes); version 3's header holds the CRC-32 of every stored blob instead."""
     h = hashlib.sha256()
     if version >= 2:
         h.update(canonical_header(header))
+    if version >= 3:  # the header's members hold every blob's CRC-32
+        return h.hexdigest()
     return _hash_arrays(arrays, arrays.keys(), h)
 
 
@@ -243,27 +304,47 @@ def _check_header(header: dict, arrays: dict, name: str) -> None:
     if not isinstance(shapes, dict):
         bad("shapes", "not an object")
     for key, shape in shapes.items():
-        if key not in arrays or shape != list(np.shape(arrays[key])):
+        if key not in arrays or shape != list(np.shape(_peek(arrays, key))):
             bad("shapes", f"{_quote(key)}: {_quote(shape)} is not the shape of an array of the file")
 
 
-def _within(name: str, what: str, x: np.ndarray, lo, hi) -> None:
-    """Raise GraphFormatError unless every x lies in [lo, hi) (bounds: numbers or arrays like x)."""
-    if len(x) == 0:
+def _peek(a, k: str):
+    """Array ``k`` of a graph's arrays without decoding it: the array, or the graph_compact.Member
+    of a compact file not decoded yet."""
+    return a.peek(k) if isinstance(a, GraphArrays) else a[k]
+
+
+def _values(x) -> np.ndarray:
+    """What range checks read of an array or a Member (Member.values: the same values)."""
+    return x.values() if isinstance(x, Member) else x
+
+
+def _at(x, i: int) -> str:
+    """Where value i of _values(x) lies, for messages."""
+    j = x.value_index(i) if isinstance(x, Member) else i
+    return f"at [{j}]" if j >= 0 else "in its table of values"
+
+
+def _within(name: str, what: str, x, lo, hi) -> None:
+    """Raise GraphFormatError unless every value of x (an array or a Member) lies in [lo, hi)
+    (bounds: numbers or arrays like x)."""
+    v = _values(x)
+    if len(v) == 0:
         return
     if np.ndim(lo) == 0 and np.ndim(hi) == 0:
-        if x.min() >= lo and x.max() < hi:
+        if v.min() >= lo and v.max() < hi:
             return
-    out = (x < lo) | (x >= hi)
+    out = (v < lo) | (v >= hi)
     if out.any():
         i = int(np.argmax(out))
-        lo_i, hi_i = np.broadcast_to(lo, x.shape)[i], np.broadcast_to(hi, x.shape)[i]
-        raise GraphFormatError(name, f"{what}: {x[i]} at [{i}] is outside [{lo_i}, {hi_i})")
+        lo_i, hi_i = np.broadcast_to(lo, v.shape)[i], np.broadcast_to(hi, v.shape)[i]
+        raise GraphFormatError(name, f"{what}: {v[i]} {_at(x, i)} is outside [{lo_i}, {hi_i})")
 
 
-def _check_arrays(a: dict, header: dict, name: str) -> None:
-    """Dtypes, lengths and ranges of a graph's arrays, with the number of actions of the header's
-    library when it records one."""
+def _check_arrays(a, header: dict, name: str) -> None:
+    """Dtypes, lengths and ranges of a graph's arrays (a dict, or the GraphArrays of a compact
+    file, read in their stored form), with the number of actions of the header's library when it
+    records one."""
     from motion_graph.classify import KINDS
 
     def bad(what: str, problem: str):
@@ -272,47 +353,51 @@ def _check_arrays(a: dict, header: dict, name: str) -> None:
     missing = [k for k in ALL_ARRAYS if k not in a]
     if missing:
         bad("arrays", f"missing {', '.join(missing)}")
-    for k, dt in [*ALL_ARRAYS.items(), *((("library_npz", np.uint8),) if "library_npz" in a else ())]:
-        x = a[k]
-        if not isinstance(x, np.ndarray) or x.dtype != np.dtype(dt) or x.ndim != 1:
-            bad(k, f"dtype {getattr(x, 'dtype', type(x).__name__)} with {np.ndim(x)} dims (expected 1-d {np.dtype(dt)})")
-    S, E = len(a["state_r"]), len(a["edge_target"])
+    x_of = {k: _peek(a, k) for k in [*ALL_ARRAYS, *(("library_npz",) if "library_npz" in a else ())]}
+    for k, x in x_of.items():
+        dt = ALL_ARRAYS.get(k, np.uint8)
+        if not isinstance(x, (np.ndarray, Member)) or x.dtype != np.dtype(dt) or len(x.shape) != 1:
+            bad(k, f"dtype {getattr(x, 'dtype', type(x).__name__)} with {len(np.shape(x))} dims "
+                   f"(expected 1-d {np.dtype(dt)})")
+    S, E = len(x_of["state_r"]), len(x_of["edge_target"])
     if S > MAX_STATES or E > MAX_EDGES:
         bad("state_r", f"{S} states and {E} edges (at most {MAX_STATES} and {MAX_EDGES})")
     for k in STATE_ARRAYS:
-        if len(a[k]) != S:
-            bad(k, f"{len(a[k])} values for {S} states")
+        if len(x_of[k]) != S:
+            bad(k, f"{len(x_of[k])} values for {S} states")
     for k in EDGE_ARRAYS:
-        if len(a[k]) != E:
-            bad(k, f"{len(a[k])} values for {E} edges")
-    off = a["state_offsets"]
+        if len(x_of[k]) != E:
+            bad(k, f"{len(x_of[k])} values for {E} edges")
+    off = _values(x_of["state_offsets"])
     if len(off) != S + 1 or off[0] != 0 or off[-1] != E or np.any(off[1:] < off[:-1]):
         bad("state_offsets", f"not {S + 1} non-decreasing offsets from 0 to {E}")
-    for k, x in a.items():
-        if k in ALL_ARRAYS and x.dtype.kind == "f" and not np.isfinite(x).all():
-            i = int(np.argmax(~np.isfinite(x)))
-            bad(k, f"{x[i]} at [{i}] is not finite")
+    for k, x in x_of.items():
+        v = _values(x)
+        if k in ALL_ARRAYS and v.dtype.kind == "f" and not np.isfinite(v).all():
+            i = int(np.argmax(~np.isfinite(v)))
+            bad(k, f"{v[i]} {_at(x, i)} is not finite")
     for k in NON_NEGATIVE:
-        _within(name, k, a[k], 0.0, 1e6)
+        _within(name, k, x_of[k], 0.0, 1e6)
     for k in ANGLES:
-        _within(name, k, a[k], -np.pi - 1e-9, np.pi + 1e-9)
+        _within(name, k, x_of[k], -np.pi - 1e-9, np.pi + 1e-9)
     for k in DAMAGES:
-        _within(name, k, a[k], -1e12, 1e12)
-    _within(name, "edge_target", a["edge_target"], 0, S)
-    _within(name, "edge_swap", a["edge_swap"], 0, 2)
+        _within(name, k, x_of[k], -1e12, 1e12)
+    _within(name, "edge_target", x_of["edge_target"], 0, S)
+    _within(name, "edge_swap", x_of["edge_swap"], 0, 2)
     n_actions = header.get("library", {}).get("n_actions")
     A = int(n_actions) if n_actions is not None else 1 << 31
     for k in ("edge_action", "state_m_self", "state_m_other", "state_nextset"):
-        _within(name, k, a[k], 0, A)
-    _within(name, "state_f_other", a["state_f_other"], 0, 1 << 31)
-    _within(name, "state_mask_other", a["state_mask_other"], 0, 1 << 62)
-    _within(name, "state_size", a["state_size"], 1, 1 << 31)
+        _within(name, k, x_of[k], 0, A)
+    _within(name, "state_f_other", x_of["state_f_other"], 0, 1 << 31)
+    _within(name, "state_mask_other", x_of["state_mask_other"], 0, 1 << 62)
+    _within(name, "state_size", x_of["state_size"], 1, 1 << 31)
     for k in ("feat_kind", "feat_other_kind"):
-        _within(name, k, a[k], 0, len(KINDS))
+        _within(name, k, x_of[k], 0, len(KINDS))
 
 
-def _check_with_library(a: dict, header: dict, lib, name: str) -> None:
-    """The graph's actions, frames, masks, Next-sets, menus and kinds against its action library."""
+def _check_with_library(a, header: dict, lib, name: str) -> None:
+    """The graph's actions, frames, masks, Next-sets, menus and kinds against its action library
+    (on the stored form of a compact file's arrays, as _check_arrays)."""
     from igraph_fight.locate import nextset_ids
     from motion_graph.library import validate_library
 
@@ -324,39 +409,44 @@ def _check_with_library(a: dict, header: dict, lib, name: str) -> None:
     hdr = header.get("library", {}).get("n_actions")
     if hdr is not None and hdr != A:
         raise GraphFormatError(name, f"library.n_actions: {_quote(hdr)} in the header, the library has {A}")
+    x_of = {k: _peek(a, k) for k in ("edge_action", "state_m_self", "state_m_other", "state_f_other",
+                                     "state_nextset", "state_mask_other", "state_offsets", "feat_kind",
+                                     "feat_other_kind")}
+    v = {k: _values(x) for k, x in x_of.items()}
     for k in ("edge_action", "state_m_self", "state_m_other"):
-        _within(name, k, a[k], 0, A)
-    m_self, m_other = a["state_m_self"].astype(np.int64), a["state_m_other"].astype(np.int64)
-    _within(name, "state_f_other", a["state_f_other"], 0, np.diff(np.asarray(lib.frame_offsets, np.int64))[m_other])
+        _within(name, k, x_of[k], 0, A)
+    m_self, m_other = v["state_m_self"], v["state_m_other"]  # in range: they index as they are
+    _within(name, "state_f_other", x_of["state_f_other"], 0, np.diff(np.asarray(lib.frame_offsets, np.int64))[m_other])
     ns = nextset_ids(lib)[m_self]
-    wrong = np.nonzero(a["state_nextset"] != ns)[0]
+    wrong = np.nonzero(v["state_nextset"] != ns)[0]
     if len(wrong):
         i = int(wrong[0])
-        raise GraphFormatError(name, f"state_nextset: {a['state_nextset'][i]} at [{i}] is not the Next-set "
+        raise GraphFormatError(name, f"state_nextset: {v['state_nextset'][i]} at [{i}] is not the Next-set "
                                      f"{ns[i]} of its action {m_self[i]}")
     n_strikes = np.minimum(np.diff(np.asarray(lib.strike_offsets, np.int64))[m_other], 62)
-    _within(name, "state_mask_other", a["state_mask_other"], 0, np.left_shift(np.int64(1), n_strikes))
-    deg = np.diff(a["state_offsets"])
-    action = a["edge_action"]
+    _within(name, "state_mask_other", x_of["state_mask_other"], 0, np.left_shift(np.int64(1), n_strikes))
+    deg = np.diff(v["state_offsets"])
+    action = v["edge_action"]
+    src = np.repeat(m_self, deg)  # the source state's action per edge, in m_self's (stored) dtype
     if A <= 4096:  # a table of legal (action, next action) pairs
         legal = np.zeros((A, A), dtype=np.bool_)
         legal[np.repeat(np.arange(A), np.diff(np.asarray(lib.next_offsets, np.int64))), np.asarray(lib.next_ids)] = True
-        ok = legal[np.repeat(m_self, deg), action]
+        ok = legal[src, action]
     else:  # sorted (action, next action) keys
         menu = np.unique(np.repeat(np.arange(A, dtype=np.int64), np.diff(np.asarray(lib.next_offsets, np.int64))) * A
                          + np.asarray(lib.next_ids, np.int64))
-        key = np.repeat(m_self, deg) * A + action
+        key = src.astype(np.int64) * A + action
         ok = menu[np.minimum(np.searchsorted(menu, key), len(menu) - 1)] == key if len(menu) else key < 0
     if not ok.all():
         e = int(np.argmin(ok))
-        src = np.repeat(m_self, deg)
         raise GraphFormatError(name, f"edge_action: {action[e]} at [{e}] is not in the menu of its state's "
                                      f"action {src[e]}")
-    kinds = np.asarray(lib.kinds, np.int32)
+    kinds = np.asarray(lib.kinds)
+    kinds = kinds.astype(gc.narrow_dtype(kinds))
     for k, want in (("feat_kind", kinds[action]), ("feat_other_kind", np.repeat(kinds[m_other], deg))):
-        if not np.array_equal(a[k], want):
-            e = int(np.argmax(a[k] != want))
-            raise GraphFormatError(name, f"{k}: {a[k][e]} at [{e}] is not the kind {want[e]} of its action")
+        if not np.array_equal(v[k], want):
+            e = int(np.argmax(v[k] != want))
+            raise GraphFormatError(name, f"{k}: {v[k][e]} at [{e}] is not the kind {want[e]} of its action")
 
 
 def _check_members(header: dict, members: dict, name: str) -> None:
@@ -365,6 +455,8 @@ def _check_members(header: dict, members: dict, name: str) -> None:
     if fmt != FORMAT:
         raise GraphFormatError(name, f"not an igraph-fight graph file (format {_quote(fmt)})")
     v = header.get("version")
+    if v == 3:
+        raise GraphFormatError(name, "version: an .npz graph file of version 3 (version 3 is the compact container)")
     if isinstance(v, bool) or v not in READABLE_VERSIONS:
         raise GraphFormatError(name, f"version: graph version {_quote(v)} is not supported (this package reads "
                                      f"{' and '.join(map(str, READABLE_VERSIONS))}); rebuild it with `igraph-fight build`")
@@ -385,12 +477,85 @@ def _check_members(header: dict, members: dict, name: str) -> None:
             raise GraphFormatError(name, f"{k}: {members[k].shape[0]} values (expected {n})")
 
 
+def _check_compact_index(header: dict, size: int, data_start: int, name: str) -> None:
+    """Format, version and every member spec of a compact file's index (nothing read yet):
+    the arrays of ALL_ARRAYS (and library_npz), their canonical dtypes, shapes of S + 1, S or E
+    values, blobs inside the file, and what decoding allocates within the file's budget."""
+    fmt = header.get("format")
+    if fmt != FORMAT:
+        raise GraphFormatError(name, f"not an igraph-fight graph file (format {_quote(fmt)})")
+    v = header.get("version")
+    if isinstance(v, bool) or v != 3:
+        raise GraphFormatError(name, f"version: graph version {_quote(v)} is not supported in a compact file "
+                                     f"(version 3)")
+    members = header.get("members")
+    if not isinstance(members, dict):
+        raise GraphFormatError(name, "members: not an object")
+    missing = [k for k in ALL_ARRAYS if k not in members]
+    if missing:
+        raise GraphFormatError(name, f"arrays: missing {', '.join(missing)}")
+    extra = sorted(set(members) - set(ALL_ARRAYS) - {"library_npz"})
+    if extra:
+        raise GraphFormatError(name, f"arrays: unexpected {_quote(extra[0])}")
+    need = 0
+    for k, m in members.items():
+        try:
+            need += gc.check_spec(k, m, np.dtype(ALL_ARRAYS.get(k, np.uint8)), size, data_start, DERIVED)
+        except gc.FormatProblem as e:
+            raise GraphFormatError(name, str(e)) from None
+        if m["encoding"] == "offsets" and k != "state_offsets":
+            raise GraphFormatError(name, f"{k}: only state_offsets may be stored as offsets")
+    budget = gc.MAX_INFLATION * size + gc.INFLATION_SLACK
+    if need > budget:
+        raise GraphFormatError(name, f"members declare {need} bytes once decoded, more than the {budget} allowed "
+                                     f"for a file of {size}")
+    S, E = members["state_r"]["shape"][0], members["edge_target"]["shape"][0]
+    for k in ALL_ARRAYS:
+        n = S + 1 if k == "state_offsets" else S if k in STATE_ARRAYS else E
+        if members[k]["shape"][0] != n:
+            raise GraphFormatError(name, f"{k}: {members[k]['shape'][0]} values (expected {n})")
+
+
+def _read_compact(path: str) -> tuple[dict, GraphArrays]:
+    """The header and arrays of a compact (version 3) file: index vetted, checksum and CRC-32s
+    checked, the memory-mapped arrays mapped and what validation reads of the others read."""
+    from motion_graph.library import parse_json_header
+
+    size = os.path.getsize(path)
+    try:
+        with open(path, "rb") as fh:
+            raw, data_start = gc.read_index(fh, size, HEADER_MAX_BYTES)
+    except gc.FormatProblem as e:
+        raise GraphFormatError(path, str(e)) from None
+    except OSError as e:
+        raise GraphFormatError(path, f"cannot be read ({e.strerror or type(e).__name__})") from None
+    header = parse_json_header(raw, path, GraphFormatError)
+    _check_compact_index(header, size, data_start, path)
+    try:
+        ok = graph_checksum(header, {}, 3) == header.get("checksum")
+    except ValueError:
+        ok = False
+    if not ok:
+        raise GraphFormatError(path, "checksum: mismatch, the file is corrupted")
+    mm = gc.open_map(path, size)
+    loaded, members = {}, {}
+    try:
+        for k, x in gc.load_members(mm, header["members"]).items():
+            (members if isinstance(x, Member) else loaded)[k] = x
+    except gc.FormatProblem as e:
+        raise GraphFormatError(path, str(e)) from None
+    return header, GraphArrays(loaded, members, DERIVED, order=list(header["members"]))
+
+
 def read_graph_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
-    """The header and arrays of a graph file, read boundedly and checksum-verified (no value
-    checks: InteractionGraph.load adds them)."""
+    """The header and arrays of a graph file of any readable version, read boundedly and
+    checksum-verified (no value checks: InteractionGraph.load adds them). Version 3's arrays are
+    a graph_compact.GraphArrays (decoded on first access)."""
     from motion_graph.library import read_npz
 
     name = str(path)
+    if _is_compact(name):
+        return _read_compact(name)
     header, data = read_npz(name, name, "igraph-fight graph file", max_header_bytes=HEADER_MAX_BYTES,
                             max_inflation=1.0, check=lambda h, m: _check_members(h, m, name), error=GraphFormatError)
     try:
@@ -400,6 +565,14 @@ def read_graph_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray
     if not ok:
         raise GraphFormatError(name, "checksum: mismatch, the file is corrupted")
     return header, data
+
+
+def _is_compact(path: str) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return gc.is_compact(fh.read(len(gc.MAGIC)))
+    except OSError as e:
+        raise GraphFormatError(path, f"cannot be read ({e.strerror or type(e).__name__})") from None
 
 
 def library_fingerprint(lib) -> str:
@@ -644,9 +817,15 @@ class InteractionGraph:
         rep = self.header.get("report", {})
         from motion_graph.classify import KINDS
         kinds = np.bincount(self.arrays["feat_kind"], minlength=len(KINDS)) if E else np.zeros(len(KINDS), int)
+        version = self.header.get("version", VERSION)
+        path = self.header.get("path")
         return {
-            "path": self.header.get("path"),
-            "format": self.header.get("format", FORMAT), "version": self.header.get("version", VERSION),
+            "path": path,
+            "format": self.header.get("format", FORMAT), "version": version,
+            "storage": ("compact (version 3: memory-mapped floats, narrowed and deflated integers and tables)"
+                        if version >= 3 else f"npz (version {version}, the old format: `igraph-fight graph convert` "
+                                             f"rewrites it as version 3)"),
+            "file_bytes": os.path.getsize(path) if path and os.path.exists(path) else None,
             "package_version": self.header.get("package_version"), "created": self.header.get("created"),
             "seed": self.header.get("seed"), "library_fingerprint": self.library_fingerprint,
             "n_states": S, "n_edges": E, "n_groups": int(len(np.unique(self.groups()))) if S else 0,
@@ -687,22 +866,29 @@ class InteractionGraph:
         return g
 
     # ----- persistence ----------------------------------------------------------------------
-    def save(self, path: str | os.PathLike) -> None:
-        """Write the graph file (version 2: uncompressed .npz with a JSON header) atomically,
-        after ``validate()`` (a graph that saves loads)."""
+    def save(self, path: str | os.PathLike, version: int = VERSION) -> None:
+        """Write the graph file atomically, after ``validate()`` (a graph that saves loads):
+        version 3 (the default: compact) or 2 (the .npz that older packages read)."""
+        if version not in WRITABLE_VERSIONS:
+            raise ValueError(f"graph files are written as version {' or '.join(map(str, WRITABLE_VERSIONS))}, "
+                             f"not {version!r}")
         self.validate()
         arrays = {k: np.ascontiguousarray(self.arrays[k], dtype=ALL_ARRAYS[k]) for k in ALL_ARRAYS}
         if "library_npz" in self.arrays:
             arrays["library_npz"] = np.ascontiguousarray(self.arrays["library_npz"], dtype=np.uint8)
-        header = {k: v for k, v in self.header.items() if k not in ("path", "checksum")}
-        header.update(format=FORMAT, version=VERSION, content_hash=_hash_arrays(arrays, ALL_ARRAYS),
+        header = {k: v for k, v in self.header.items() if k not in ("path", "checksum", "members")}
+        header.update(format=FORMAT, version=version, content_hash=_hash_arrays(arrays, ALL_ARRAYS),
                       shapes={k: list(v.shape) for k, v in arrays.items()})
         header.setdefault("created", _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
         header.setdefault("package_version", package_version())
         if "report" in header:
             header["report"] = _finite_or_none(header["report"])
         header = json.loads(json.dumps(header, allow_nan=False))  # as load will parse it
-        header["checksum"] = graph_checksum(header, arrays)
+        if version >= 3:
+            written = write_compact(path, header, arrays)
+            self.header = {**written, "path": str(path)}
+            return
+        header["checksum"] = graph_checksum(header, arrays, version)
         raw = json.dumps(header).encode()
         if len(raw) > HEADER_MAX_BYTES:
             raise ValueError(f"graph header of {len(raw)} bytes (at most {HEADER_MAX_BYTES})")
@@ -733,6 +919,55 @@ class InteractionGraph:
         return g
 
 
+def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray]) -> dict[str, dict]:
+    """The member specs of a version 3 file for ``arrays`` (their blobs added to ``w``): see the
+    module docstring for which array is stored how."""
+    members = {}
+    for k in [*ALL_ARRAYS, *(("library_npz",) if "library_npz" in arrays else ())]:
+        a = np.ascontiguousarray(arrays[k])
+        spec = None
+        if k == "state_offsets":
+            spec = gc.encode_offsets(w, a)
+        elif k in DERIVED:
+            try:
+                with np.errstate(all="ignore"):
+                    derived = DERIVED[k](arrays)
+            except (IndexError, ValueError, TypeError):  # arrays that do not fit together (crafted files)
+                derived = None
+            if derived is not None and np.shape(derived) == a.shape:
+                spec = gc.encode_derived(w, a, k, derived)
+        if spec is None:
+            if k in COMPACT_MAPPED or k in COMPACT_COPIED:
+                spec = gc.encode_raw(w, a, copy=k in COMPACT_COPIED)
+            elif a.dtype.kind in "iu":
+                spec = gc.encode_ints(w, a)
+            else:
+                spec = gc.encode_floats(w, a, deflate=True)
+        members[k] = spec
+    return members
+
+
+def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray]) -> dict:
+    """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a version 3 file, atomically,
+    without validating them; returns the index written (the header with ``members`` and
+    ``checksum``). ``save`` is the way to write a graph; this is what it calls."""
+    w = gc.Writer()
+    header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": 3,
+              "members": compact_members(w, arrays)}
+    out: dict = {}
+
+    def write(fh) -> None:
+        out.update(w.finish(fh, header, lambda h: graph_checksum(h, {}, 3)))
+        fh.flush()
+        kill_point("write")
+
+    text_size = len(json.dumps(header).encode())
+    if text_size > HEADER_MAX_BYTES:
+        raise ValueError(f"graph header of {text_size} bytes (at most {HEADER_MAX_BYTES})")
+    atomic_write(path, write)
+    return out
+
+
 def load_graph(path: str | os.PathLike) -> InteractionGraph:
     """InteractionGraph.load."""
     return InteractionGraph.load(path)
@@ -751,10 +986,28 @@ def export_graphml(graph: InteractionGraph, path: str | os.PathLike) -> None:
 
 def header_summary(path: str | os.PathLike) -> dict:
     """The header of a graph file without reading the arrays (for quick listing; GraphFormatError
-    when it is no graph file)."""
-    from motion_graph.library import read_npz
+    when it is no graph file). Version 3: the index, ``members`` included."""
+    from motion_graph.library import parse_json_header, read_npz
 
     name = str(Path(path))
+    if _is_compact(name):
+        size = os.path.getsize(name)
+        try:
+            with open(name, "rb") as fh:
+                raw, data_start = gc.read_index(fh, size, HEADER_MAX_BYTES)
+        except gc.FormatProblem as e:
+            raise GraphFormatError(name, str(e)) from None
+        header = parse_json_header(raw, name, GraphFormatError)
+        _check_compact_index(header, size, data_start, name)
+        return header
     header, _ = read_npz(name, name, "igraph-fight graph file", max_header_bytes=HEADER_MAX_BYTES, max_inflation=1.0,
                          check=lambda h, m: _check_members(h, m, name), error=GraphFormatError, only=())
     return header
+
+
+def convert_graph_file(src: str | os.PathLike, dst: str | os.PathLike, version: int = VERSION) -> InteractionGraph:
+    """Load a graph file of any readable version (validated) and write it as ``version``
+    (atomically); the content hash stays. Returns the graph as saved."""
+    g = InteractionGraph.load(src)
+    g.save(dst, version=version)
+    return g

@@ -1,7 +1,8 @@
 """Hostile graph and library files: every crafted file is a one-line GraphFormatError (or
 LibraryFormatError) naming the field, memory stays bounded, and the CLI exits 2 without a
 traceback. Crafted files carry a checksum recomputed by the attacker (a sha256 anyone can
-recompute), so only the value checks stand between them and the numba kernels."""
+recompute), so only the value checks stand between them and the numba kernels. Every case runs
+on the .npz versions 1 and 2 and on the compact version 3 (igraph_fight.graph_compact)."""
 from __future__ import annotations
 
 import dataclasses
@@ -19,17 +20,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from igraph_fight import graph_compact
 from igraph_fight.graph import (
-    HEADER_OPTIONS, SIM_OPTIONS, GraphFormatError, InteractionGraph, graph_checksum, header_summary,
-    library_fingerprint)
+    ALL_ARRAYS, HEADER_OPTIONS, SIM_OPTIONS, GraphFormatError, InteractionGraph, graph_checksum, header_summary,
+    library_fingerprint, read_graph_file, write_compact)
 from motion_graph.errors import LibraryFormatError
 from motion_graph.library import library_from_bytes, load_library
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
+VERSIONS = [1, 2, 3]
+
+
 # ---- crafting files as an attacker would ---------------------------------------------------------
 def read_raw(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """A graph file's header (as an .npz of version 2 holds it) and its arrays (plain copies)."""
+    if graph_compact.is_compact(Path(path).read_bytes()[:8]):
+        header, arrays = read_graph_file(path)
+        header = {k: v for k, v in header.items() if k not in ("members", "checksum")}
+        return {**header, "version": 2}, {k: np.array(arrays[k]) for k in arrays}
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     return json.loads(bytes(arrays.pop("header")).decode()), arrays
@@ -42,7 +52,11 @@ def savez(path: Path, **arrays: np.ndarray) -> None:
 
 
 def write_graph(path: Path, header: dict, arrays: dict[str, np.ndarray], version: int = 2) -> Path:
-    """A graph file with ``header`` and ``arrays`` and a valid checksum of ``version``'s rule."""
+    """A graph file with ``header`` and ``arrays`` and a valid checksum of ``version``'s rule
+    (version 3: igraph_fight.graph.write_compact, which writes what it is given unchecked)."""
+    if version == 3:
+        write_compact(path, header, arrays)
+        return path
     header = {**header, "version": version}
     header["checksum"] = graph_checksum(header, arrays, version)
     savez(path, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays)
@@ -104,6 +118,25 @@ def zeros_deflated(prefix: bytes, n_zeros: int) -> bytes:
     rest = n_zeros - n * (n_zeros // n)
     return (block(prefix) + block(bytes(n)) * (n_zeros // n) + (block(bytes(rest)) if rest else b"")
             + zlib.compressobj(9, zlib.DEFLATED, -15).flush())
+
+
+def read_index(path: Path) -> tuple[dict, int, bytes]:
+    """A compact file's index, where its blobs start and the whole file's bytes."""
+    data = path.read_bytes()
+    (n,) = struct.unpack("<Q", data[8:16])
+    return json.loads(data[16:16 + n]), 16 + n, data
+
+
+def reseal(path: Path, edit) -> Path:
+    """Edit a compact file's index (``edit(index)`` in place), recompute its checksum as an
+    attacker would and write it back in the index's place (compact JSON: it fits)."""
+    index, start, data = read_index(path)
+    edit(index)
+    index["checksum"] = graph_checksum(index, {}, 3)
+    text = json.dumps(index, separators=(",", ":")).encode()
+    assert 16 + len(text) <= start, "the edited index does not fit"
+    path.write_bytes(data[:16] + text + b" " * (start - 16 - len(text)) + data[start:])
+    return path
 
 
 def one_line(err: BaseException) -> str:
@@ -177,7 +210,7 @@ ARRAY_CASES = ("edge_action_huge", "edge_action_negative", "edge_action_off_menu
                "state_theta_huge", "edge_snap_negative")
 
 
-@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("version", VERSIONS)
 @pytest.mark.parametrize("case", ARRAY_CASES)
 def test_out_of_range_arrays_are_refused_naming_the_array(raw, lib, tmp_path, case, version):
     h, a = raw
@@ -188,9 +221,9 @@ def test_out_of_range_arrays_are_refused_naming_the_array(raw, lib, tmp_path, ca
     one_line(err.value)
 
 
-def test_the_untouched_file_loads_in_both_versions(raw, tmp_path, tiny_graph_file):
+def test_the_untouched_file_loads_in_every_version(raw, tmp_path, tiny_graph_file):
     want = InteractionGraph.load(tiny_graph_file).content_hash
-    for version in (1, 2):
+    for version in VERSIONS:
         g = InteractionGraph.load(crafted(tmp_path, raw, version, name=f"v{version}.igz"))
         assert g.content_hash == want and g.header["version"] == version
 
@@ -222,7 +255,7 @@ HEADER_CASES = {
 }
 
 
-@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("version", VERSIONS)
 @pytest.mark.parametrize("case", sorted(HEADER_CASES))
 def test_bad_header_fields_are_refused_naming_the_field(raw, tmp_path, case, version):
     make, field = HEADER_CASES[case]
@@ -253,6 +286,173 @@ def test_the_checksum_covers_the_header_in_version_2(raw, tmp_path):
     header["seed"] = 12345
     savez(path1, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays)
     assert InteractionGraph.load(path1).header["seed"] == 12345
+
+
+def test_the_checksum_and_crcs_cover_a_compact_file(raw, tmp_path):
+    path = crafted(tmp_path, raw, 3)
+    index, start, data = read_index(path)
+    index["seed"] = 12345  # tampered after the checksum was computed
+    text = json.dumps(index, separators=(",", ":")).encode()
+    path.write_bytes(data[:16] + text + b" " * (start - 16 - len(text)) + data[start:])
+    with pytest.raises(GraphFormatError, match="checksum: mismatch"):
+        InteractionGraph.load(path)
+    path = crafted(tmp_path, raw, 3, name="flip.igz")
+    index, start, data = read_index(path)
+    for k in ("feat_r", "edge_action"):  # a memory-mapped blob and a deflated one
+        b = index["members"][k]["data"]
+        flipped = bytearray(data)
+        flipped[b["offset"] + b["nbytes"] // 2] ^= 0x10
+        path.write_bytes(bytes(flipped))
+        with pytest.raises(GraphFormatError, match=rf"flip\.igz: {k}\.data: truncated or corrupted \(CRC-32") as err:
+            InteractionGraph.load(path)
+        one_line(err.value)
+
+
+def test_an_npz_claiming_version_3_is_refused(raw, tmp_path):
+    h, a = raw
+    header = {**h, "version": 3}
+    header["checksum"] = graph_checksum(header, a, 2)
+    savez(tmp_path / "v3.igz", header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **a)
+    with pytest.raises(GraphFormatError, match="version: an .npz graph file of version 3"):
+        InteractionGraph.load(tmp_path / "v3.igz")
+
+
+def _spec_cases(index: dict) -> dict:
+    """case -> (edit of a compact file's index, what the error names)."""
+    m = index["members"]
+
+    def put(k, **kw):
+        return lambda ix: ix["members"][k].update(kw)
+
+    def put_blob(k, part="data", **kw):
+        return lambda ix: ix["members"][k][part].update(kw)
+
+    return {
+        "unknown_encoding": (put("feat_r", encoding="guess"), "feat_r: encoding 'guess' is not one of"),
+        "float32_feature": (put("feat_r", dtype="<f4"), r"feat_r: dtype '<f4' \(expected 1-d float64\)"),
+        "big_endian_blob": (put_blob("feat_r", dtype=">f8"), "feat_r.data: dtype '>f8' is not a plain little-endian"),
+        "two_dims": (put("edge_target", shape=[2, 3]), r"edge_target: shape \[2, 3\]"),
+        "more_edges": (put("feat_r", shape=[m["feat_r"]["shape"][0] + 1]), "feat_r: raw data of"),
+        "misaligned": (put_blob("feat_r", offset=m["feat_r"]["data"]["offset"] + 8), "feat_r.data: offset .* multiple of 64"),
+        "past_the_end": (put_blob("feat_r_mean", offset=m["feat_r_mean"]["data"]["offset"] + (1 << 30)),
+                         "truncated or corrupted \\(feat_r_mean.data ends at byte"),
+        "inside_the_index": (put_blob("feat_r", offset=0), "feat_r.data: offset 0 lies inside the index"),
+        "compression": (put_blob("edge_action", compression="lzma"), "edge_action.data: compression 'lzma'"),
+        "derived_formula": (put("edge_snap_r", formula="edge_snap_theta"), "edge_snap_r: formula 'edge_snap_theta'"),
+        "derived_feature": (lambda ix: ix["members"].update(feat_kind={"encoding": "derived", "formula": "feat_kind",
+                                                                       "dtype": "<i4", "shape": m["feat_kind"]["shape"]}),
+                            "feat_kind: formula 'feat_kind' is not known"),
+        "table_of_ints": (put("edge_action", encoding="table", values=[0.0]), "edge_action: table values"),
+        "offsets_elsewhere": (put("edge_action", encoding="offsets"), "edge_action: offset differences"),
+        "unknown_member": (lambda ix: ix["members"].update(surprise=m["feat_r"]), "arrays: unexpected 'surprise'"),
+        "missing_member": (lambda ix: ix["members"].pop("feat_r"), "arrays: missing feat_r"),
+        "members_not_an_object": (lambda ix: ix.update(members=[1]), "members: not an object"),
+        "version": (lambda ix: ix.update(version=2), "version: graph version 2 is not supported in a compact file"),
+    }
+
+
+SPEC_CASES = ("unknown_encoding", "float32_feature", "big_endian_blob", "two_dims", "more_edges", "misaligned",
+              "past_the_end", "inside_the_index", "compression", "derived_formula", "derived_feature", "table_of_ints",
+              "offsets_elsewhere", "unknown_member", "missing_member", "members_not_an_object", "version")
+
+
+@pytest.mark.parametrize("case", SPEC_CASES)
+def test_bad_member_specs_of_a_compact_file_are_refused(raw, tmp_path, case):
+    path = crafted(tmp_path, raw, 3)
+    edit, match = _spec_cases(read_index(path)[0])[case]
+    reseal(path, edit)
+    with pytest.raises(GraphFormatError, match=rf"bad\.igz: {match}") as err:
+        InteractionGraph.load(path)
+    one_line(err.value)
+
+
+def test_table_codes_and_derived_exceptions_are_checked(raw, tmp_path):
+    h, a = raw
+    # a code past its table: the table of feat_dmg_given cut to one value, checksum recomputed
+    path = crafted(tmp_path, raw, 3)
+    index = read_index(path)[0]
+    assert index["members"]["feat_dmg_given"]["encoding"] == "table"
+    assert index["members"]["edge_snap_r"]["encoding"] == "derived"
+    assert index["members"]["feat_r"]["encoding"] == "raw"
+    if len(index["members"]["feat_dmg_given"]["values"]) > 1:
+        reseal(path, lambda ix: ix["members"]["feat_dmg_given"].update(values=[0.0]))
+        with pytest.raises(GraphFormatError, match=r"feat_dmg_given: code 1 at \[\d+\] is outside its table"):
+            InteractionGraph.load(path)
+    # a damage beyond the range in the table itself
+    path = crafted(tmp_path, raw, 3, arrays={"feat_dmg_given": np.where(a["feat_dmg_given"] > 0, 1e13, 0.0)},
+                   name="t.igz")
+    assert read_index(path)[0]["members"]["feat_dmg_given"]["encoding"] == "table"
+    with pytest.raises(GraphFormatError, match=r"feat_dmg_given: 10000000000000.0 in its table of values is outside"):
+        InteractionGraph.load(path)
+
+
+def test_compact_header_json_is_strict_and_capped(raw, tmp_path):
+    for text, match in ((b'{"format": NaN}', "header: not valid JSON"), (b'{"seed": 1e400}', "not a finite number"),
+                        (b"[1, 2]", "header: not a JSON object"), (b'{"a": 1, "a": 2}', "duplicate key 'a'"),
+                        (b"[" * 100_000, "header: not valid JSON"),
+                        (b" " * (5 << 20), r"header: 5242880 bytes of JSON \(at most")):
+        (tmp_path / "h.igz").write_bytes(graph_compact.MAGIC + struct.pack("<Q", len(text)) + text)
+        with pytest.raises(GraphFormatError, match=match) as err:
+            InteractionGraph.load(tmp_path / "h.igz")
+        one_line(err.value)
+    (tmp_path / "h.igz").write_bytes(graph_compact.MAGIC + struct.pack("<Q", 1 << 40))
+    with pytest.raises(GraphFormatError, match=r"h\.igz: header: \d+ bytes of JSON"):
+        InteractionGraph.load(tmp_path / "h.igz")
+    (tmp_path / "h.igz").write_bytes(graph_compact.MAGIC + struct.pack("<Q", 100) + b"{}")
+    with pytest.raises(GraphFormatError, match=r"h\.igz: truncated or corrupted"):
+        InteractionGraph.load(tmp_path / "h.igz")
+
+
+def test_a_compact_bomb_is_refused_before_it_inflates(raw, tmp_path):
+    path = crafted(tmp_path, raw, 3)
+    size = path.stat().st_size
+    n = 3 << 30
+    # (1) edge_action's deflated blob declares 3 Gi values: refused before anything is inflated
+    bomb = reseal(Path(shutil.copy(path, tmp_path / "bomb.igz")), lambda ix: (
+        ix["members"]["edge_action"].update(shape=[n]), ix["members"]["edge_action"]["data"].update(count=n)))
+    # (2) the stream holds more than its blob declares: inflated no further than the declared size
+    index, start, data = read_index(path)
+    b = index["members"]["edge_action"]["data"]
+    more = zlib.compress(bytes(b["count"] + (8 << 20)), 9)
+    grown = data[:b["offset"]] + more + data[b["offset"] + b["nbytes"]:] if len(more) <= b["nbytes"] else None
+    before = _peak_rss_mb()
+    with pytest.raises(GraphFormatError, match=r"bomb\.igz: members declare \d+ bytes once decoded, more than") as err:
+        InteractionGraph.load(bomb)
+    one_line(err.value)
+    if grown is not None:
+        (tmp_path / "bomb2.igz").write_bytes(grown)
+        reseal(tmp_path / "bomb2.igz", lambda ix: ix["members"]["edge_action"]["data"].update(
+            nbytes=len(more), crc32=zlib.crc32(more)))
+        with pytest.raises(GraphFormatError, match=r"edge_action\.data: truncated or corrupted \(the stream"):
+            InteractionGraph.load(tmp_path / "bomb2.igz")
+    assert _peak_rss_mb() - before < 100
+    assert size < 16 << 20
+
+
+def test_build_writes_the_compact_format_and_convert_goes_both_ways(raw, tmp_path, tiny_graph_file, capsys):
+    from igraph_fight.cli import main
+
+    g = InteractionGraph.load(tiny_graph_file)
+    assert g.header["version"] == 3 and header_summary(tiny_graph_file)["version"] == 3
+    want = g.content_hash
+    old = crafted(tmp_path, raw, 2, name="old.igz")
+    assert main(["graph", "convert", str(old), str(tmp_path / "new.igz"), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["src_version"] == 2 and rep["dst_version"] == 3 and rep["content_hash"] == want
+    new = InteractionGraph.load(tmp_path / "new.igz")
+    assert new.content_hash == want and new.header["content_hash"] == want
+    back = tmp_path / "back.igz"
+    assert main(["graph", "convert", str(tmp_path / "new.igz"), str(back), "--version", "2"]) == 0
+    capsys.readouterr()
+    assert InteractionGraph.load(back).header["version"] == 2 and InteractionGraph.load(back).content_hash == want
+    for k in ALL_ARRAYS:  # bit for bit, dtypes included
+        x, y = InteractionGraph.load(old).arrays[k], new.arrays[k]
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), k
+    assert main(["graph", "info", str(tmp_path / "new.igz")]) == 0
+    out = capsys.readouterr().out
+    assert "file: compact (version 3" in out and f"content hash {want}" in out
+    assert main(["graph", "info", str(old)]) == 0
+    assert "file: npz (version 2, the old format" in capsys.readouterr().out
 
 
 def test_header_json_is_strict_and_capped(raw, tmp_path):

@@ -158,7 +158,7 @@ def check_swap(value, seconds: float, option: str = "--swap-a") -> tuple[float, 
 
 #: the built-in command groups, in the order ``--help`` lists them
 BUILTIN_GROUPS = ("igraph_fight.cli.mocap", "igraph_fight.cli.graph", "igraph_fight.cli.fight",
-                  "igraph_fight.cli.evaluate", "igraph_fight.cli.play")
+                  "igraph_fight.cli.evaluate", "igraph_fight.cli.play", "igraph_fight.cli.export")
 COMMANDS_GROUP = "igraph_fight.commands"
 PHYSICS_GROUP = "igraph_fight.physics"
 

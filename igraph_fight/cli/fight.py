@@ -98,7 +98,8 @@ def cmd_policy(args: argparse.Namespace) -> int:
     from igraph_fight.graph import load_graph
 
     g = load_graph(args.graph)
-    arrays = dict(g.arrays)
+    from collections import ChainMap
+    arrays = ChainMap({}, g.arrays)  # a compact file's arrays decode on first use: only those the policy reads
     from motion_graph.classify import KINDS
     arrays.setdefault("kinds_table", np.array(KINDS))
     style = load_style(args.style)

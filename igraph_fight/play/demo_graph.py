@@ -65,8 +65,7 @@ def ensure_demo_graph(mocap: str | None = None, progress: bool = True, out=sys.s
     print(f"igraph-fight play: building the demo graph of {', '.join(f.name for f in files)} into {path} "
           f"(first start: {FIRST_START}; later starts reuse it)", file=out, flush=True)
     t0 = time.perf_counter()
-    graph, rep = build_graph(lib, options, 0, workers=0, checkpoint_dir=ckpt, progress=progress)
-    graph.save(path)
+    graph, rep = build_graph(lib, options, 0, workers=0, checkpoint_dir=ckpt, progress=progress, out=path)
     atomic_write_text(manifest, json.dumps({**want, "n_states": rep.get("n_states"), "n_edges": rep.get("n_edges"),
                                             "build_s": round(time.perf_counter() - t0, 1)}, indent=1))
     print(f"igraph-fight play: demo graph ready ({rep.get('n_states')} states, {rep.get('n_edges')} edges, "

@@ -86,8 +86,9 @@ class AssistedController:
     # ------------------------------------------------------------------ controller protocol
     def reset(self, env) -> None:
         from tracker.track.pd import PDTracker
-        if env.n_act != self.n_act:
-            raise CheckpointError(self.path, f"the policy drives {self.n_act} actuators, the body has {env.n_act}")
+        per_fighter = getattr(env, "batch", env).n_act
+        if per_fighter != self.n_act:
+            raise CheckpointError(self.path, f"the policy drives {self.n_act} actuators, the body has {per_fighter}")
         PDTracker(class_scale=self.gain_scale).reset(env)
 
     def assist_config(self):

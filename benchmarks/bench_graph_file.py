@@ -1,11 +1,12 @@
-"""Graph file size and load time: an old (version 1 or 2) file against its compact (version 3) copy.
+"""Graph file size and load time: an old (version 1 to 3) file against its compact (version 4) copy.
 
     python benchmarks/bench_graph_file.py --graph graph.igz [--out graph_v3.igz] [--repeat 5] [--policies] [--floor]
 
 Converts GRAPH to the compact format (igraph_fight.graph.convert_graph_file; skipped when OUT
 exists and holds the same content hash), then prints both files' sizes, their load times
 (InteractionGraph.load, validation included; the median of --repeat fresh processes, the files
-in the page cache), the ratios, whether both load to bit-identical arrays and the same
+in the page cache) and the time to load and touch every array (version 4 replays its edge
+features then), the ratios, whether both load to bit-identical arrays and the same
 content hash, and with --policies whether the policy tables (best_me, best_opp, V at depth D and
 D-1) of three styles at depths 1, 3 and 5 are bit-identical. --floor: what the best lossless
 compression this benchmark knows (bytes grouped by significance, then zlib level 9) would keep of
@@ -27,12 +28,15 @@ import numpy as np
 from igraph_fight.graph import ALL_ARRAYS, InteractionGraph, convert_graph_file, header_summary
 
 
-def load_seconds(path: str, repeat: int) -> float:
+def load_seconds(path: str, repeat: int, decode: bool = False) -> float:
     """Median over ``repeat`` fresh processes of one InteractionGraph.load (what a command pays;
-    imports excluded, the file in the page cache after a first read)."""
+    imports excluded, the file in the page cache after a first read); with ``decode``, of the
+    load and the first access to every array (what a policy computation adds: version 4's replay)."""
     import subprocess
+    path = os.path.abspath(path)
+    touch = "; [g.arrays[k] for k in list(g.arrays)]" if decode else ""
     code = ("import sys, time; from igraph_fight.graph import InteractionGraph; t = time.perf_counter(); "
-            "InteractionGraph.load(sys.argv[1]); print(time.perf_counter() - t)")
+            f"g = InteractionGraph.load(sys.argv[1]){touch}; print(time.perf_counter() - t)")
     times = []
     for i in range(repeat + 1):
         r = subprocess.run([sys.executable, "-c", code, path], capture_output=True, text=True, check=True,
@@ -106,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         "old": old, "new": new, "old_version": ga.header.get("version"), "new_version": gb.header.get("version"),
         "old_bytes": os.path.getsize(old), "new_bytes": os.path.getsize(new),
         "old_load_s": load_seconds(old, args.repeat), "new_load_s": load_seconds(new, args.repeat),
+        "old_decode_s": load_seconds(old, args.repeat, True), "new_decode_s": load_seconds(new, args.repeat, True),
         "arrays_identical": bool(same_arrays), "content_hash_old": ha, "content_hash_new": hb,
         "content_hash_equal": ha == hb and hb == gb.header.get("content_hash"),
     }
@@ -122,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
           f"load {res['old_load_s']:.3f} s")
     print(f"new  {new} (version {res['new_version']}): {res['new_bytes'] / 1e6:.1f} MB, "
           f"load {res['new_load_s']:.3f} s")
+    print(f"load and first access to every array: old {res['old_decode_s']:.3f} s, new {res['new_decode_s']:.3f} s")
     print(f"ratios: size {res['size_ratio']:.2f}x smaller, load {res['load_ratio']:.1f}x faster")
     print(f"arrays bit-identical: {res['arrays_identical']}; content hash {hb[:12]}... equal: {res['content_hash_equal']}")
     if args.policies:

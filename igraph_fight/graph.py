@@ -12,7 +12,17 @@ compression) does not enter it: the arrays are hashed as they are in memory afte
 
 Versions:
 
-- 3 (written now, "compact"): the container of igraph_fight.graph_compact: an index (the header
+- 4 (written now): version 3's container, with the continuous edge arrays replayed instead of
+  stored. ``feat_r``, ``feat_r_mean``, ``feat_theta_self``, ``feat_theta_other``,
+  ``edge_snap_r`` and ``edge_snap_theta`` are ``derived`` members of the ``replay/<array>``
+  formulas (REPLAYED): igraph_fight.graph_replay repeats each edge's event from its state with
+  the embedded library and the header's simulator options, the kinematics only (hits never move
+  a body), in the builder's floating-point operations. The writer compares every value bit for
+  bit (and stores those that differ) and records the CRC-32 of each array; the reader replays
+  on first access (about 1 s per 5 M edges and core) and refuses an array whose CRC-32 differs
+  (a machine whose floating point differs from the writer's: convert the file to version 3
+  where it was written). A file without an embedded library stores them as version 3 does.
+- 3 ("compact"): the container of igraph_fight.graph_compact: an index (the header
   with a ``members`` entry per array) and 64-byte aligned blobs. The continuous float arrays
   (COMPACT_MAPPED) are stored as they are and memory-mapped; integer arrays narrowed to the
   smallest integer dtype holding their values and deflated; float arrays with few distinct values
@@ -26,7 +36,8 @@ Versions:
   ``header``; ``checksum`` is sha256 over the header's JSON without ``checksum`` and every array.
 - 1 (read still): the .npz of version 2 whose checksum covers the arrays only.
 
-``igraph-fight graph convert OLD NEW`` rewrites a version 1 or 2 file as version 3. A checksum
+``igraph-fight graph convert OLD NEW`` rewrites a file of any version as version 4 (``--version
+3`` or ``2``: as those). A checksum
 anyone can recompute detects corruption, not tampering: what makes a file safe to use is that
 ``load`` also checks every value (``validate``).
 
@@ -36,7 +47,9 @@ one-line message names the file and the field. Before anything is inflated: for 
 to what its .npy shape and dtype need, all together no more than the file's size plus 1 MiB, a
 header of at most HEADER_MAX_BYTES; for version 3, the index (at most HEADER_MAX_BYTES of strict
 JSON) and every member spec: blobs inside the file, dtypes and shapes as ALL_ARRAYS says, what
-decoding allocates at most graph_compact.MAX_INFLATION times the file's size. Then the checksum
+decoding allocates at most graph_compact.MAX_INFLATION times the file's size; for version 4, a
+replayed member needs the embedded library, and the replay checks every index it follows
+(graph_replay.check_inputs) before it runs. Then the checksum
 (and version 3's CRC-32s). Then ``validate``: the header's fields and build options
 type- and range-checked (unknown option keys refused), every index array within the arrays it
 indexes, every float finite and in range, and, with the embedded library (validated as
@@ -44,7 +57,8 @@ motion_graph.library.load_library does), every action, frame, mask, Next-set, me
 consistent with it. A graph that loads is safe for the numba kernels. Version 3's validation
 reads the stored form (the narrowed integers, the tables' values, the derived arrays'
 exceptions: the same values); the arrays other than the memory-mapped ones are decoded on first
-access (graph_compact.GraphArrays).
+access (graph_compact.GraphArrays); a problem found then (a replayed array's CRC-32) is a
+GraphFormatError naming the file too.
 
 Arrays follow docs/contracts.md. States (S,), from the decider's perspective:
 ``state_r`` (m), ``state_theta_self``, ``state_theta_other`` (rad), ``state_m_self`` (a
@@ -65,7 +79,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -81,11 +95,13 @@ if TYPE_CHECKING:
     from motion_graph.library import ActionLibrary
 
 FORMAT = "igraph-fight/interaction-graph"
-VERSION = 3
+VERSION = 4
 #: versions ``load`` reads (see the module docstring for their checksum rules)
-READABLE_VERSIONS = (1, 2, 3)
+READABLE_VERSIONS = (1, 2, 3, 4)
 #: versions ``save`` writes
-WRITABLE_VERSIONS = (2, 3)
+WRITABLE_VERSIONS = (2, 3, 4)
+#: versions in the compact container (igraph_fight.graph_compact)
+COMPACT_VERSIONS = (3, 4)
 #: the largest JSON header of a graph file, bytes
 HEADER_MAX_BYTES = 4 << 20
 #: states and edges a graph may hold (planner packs 2 * target + swap into an int32)
@@ -128,6 +144,77 @@ def _snap_theta(a) -> np.ndarray:
 
 #: version 3: arrays stored as formulas of the others (plus the values where they differ)
 DERIVED = {"edge_snap_r": _snap_r, "edge_snap_theta": _snap_theta}
+#: version 4: arrays stored as the kinematic replay of their edges (igraph_fight.graph_replay)
+REPLAYED = ("feat_r", "feat_r_mean", "feat_theta_self", "feat_theta_other", "edge_snap_r", "edge_snap_theta")
+
+
+def replay_formula(name: str) -> str:
+    """The formula name of replayed array ``name``."""
+    return f"replay/{name}"
+
+
+def _replay_values(a: GraphArrays) -> dict[str, np.ndarray]:
+    """The replay of a compact file's edges (graph_replay.replay_edges, run once per file and
+    shared by the replayed arrays) plus the snapping it implies; a FormatProblem when the file
+    cannot be replayed."""
+    with a._lock:
+        cache = a.context.get("replay")
+        if cache is None:
+            cache = replayed_arrays(a, a.context.get("header", {}), a.context.get("library"),
+                                    workers=_decode_workers())
+            if isinstance(cache, str):
+                raise gc.FormatProblem(cache)
+            a.context["replay"] = cache
+        return cache
+
+
+def _decode_workers() -> int:
+    """Threads a replay uses when a file is decoded: numba's thread count (NUMBA_NUM_THREADS)."""
+    import numba
+    return max(1, int(numba.config.NUMBA_NUM_THREADS))
+
+
+def replayed_arrays(arrays, header: dict, library=None, workers: int | None = 1) -> dict[str, np.ndarray] | str:
+    """The REPLAYED arrays as the replay of ``arrays``' edges gives them, with the embedded
+    library (or ``library``) and ``header``'s simulator options, or a string saying why they
+    cannot be replayed."""
+    from igraph_fight.graph_replay import replay_edges
+    from igraph_fight.sim import SimParams, SimTables
+
+    try:
+        if library is None:
+            if "library_npz" not in arrays:
+                return "replayed arrays need the embedded library (library_npz), which the file lacks"
+            from motion_graph.library import library_from_bytes
+            library = library_from_bytes(np.asarray(arrays["library_npz"]).tobytes(), "<graph>#library")
+        opts = header.get("options") if isinstance(header, dict) else None
+        opts = (opts.get("sim") if isinstance(opts, dict) else None) or {}
+        check_options({"sim": opts}, "<graph>")
+        tables = SimTables.from_library(library, SimParams(**opts))
+        with np.errstate(all="ignore"):
+            r = replay_edges(tables, arrays, workers)
+            t = np.asarray(arrays["edge_target"])
+            r["edge_snap_r"] = np.abs(r["landing_r"] - np.asarray(arrays["state_r"])[t])
+            r["edge_snap_theta"] = np.maximum(
+                np.abs(wrap_angle(r["landing_theta_self"] - np.asarray(arrays["state_theta_self"])[t])),
+                np.abs(wrap_angle(r["landing_theta_other"] - np.asarray(arrays["state_theta_other"])[t])))
+    except (LibraryFormatError, ValueError, TypeError, IndexError, KeyError) as e:
+        return f"cannot replay the edges ({getattr(e, 'problem', None) or e})"
+    return {k: r[k] for k in REPLAYED}
+
+
+def _replayed(name: str) -> Callable:
+    def formula(a: GraphArrays) -> np.ndarray:
+        return _replay_values(a)[name]
+    formula.__doc__ = f"{name} as the kinematic replay of its edges."
+    return formula
+
+
+#: every formula a derived member may name: formula -> (the array it yields, its function)
+FORMULAS: dict[str, tuple[str, Callable]] = {
+    **{k: (k, f) for k, f in DERIVED.items()},
+    **{replay_formula(k): (k, _replayed(k)) for k in REPLAYED},
+}
 #: version 3: float arrays stored as they are and memory-mapped (continuous values: compression
 #: gains little and would cost a copy)
 COMPACT_MAPPED = ("state_r", "state_theta_self", "state_theta_other", "feat_r", "feat_r_mean", "feat_theta_self",
@@ -191,8 +278,9 @@ def canonical_header(header: dict) -> bytes:
 
 def graph_checksum(header: dict, arrays: dict[str, np.ndarray], version: int = VERSION) -> str:
     """The ``checksum`` a graph file of ``version`` records for this header and these arrays:
-    sha256 over canonical_header(header) (versions 2 and 3) and, up to version 2, every array
-    (name, dtype, shape, bytes); version 3's header holds the CRC-32 of every stored blob instead."""
+    sha256 over canonical_header(header) (versions 2 to 4) and, up to version 2, every array
+    (name, dtype, shape, bytes); the compact versions' header holds the CRC-32 of every stored
+    blob instead."""
     h = hashlib.sha256()
     if version >= 2:
         h.update(canonical_header(header))
@@ -455,8 +543,9 @@ def _check_members(header: dict, members: dict, name: str) -> None:
     if fmt != FORMAT:
         raise GraphFormatError(name, f"not an igraph-fight graph file (format {_quote(fmt)})")
     v = header.get("version")
-    if v == 3:
-        raise GraphFormatError(name, "version: an .npz graph file of version 3 (version 3 is the compact container)")
+    if v in COMPACT_VERSIONS:
+        raise GraphFormatError(name, f"version: an .npz graph file of version {v} (version {v} is the compact "
+                                     f"container)")
     if isinstance(v, bool) or v not in READABLE_VERSIONS:
         raise GraphFormatError(name, f"version: graph version {_quote(v)} is not supported (this package reads "
                                      f"{' and '.join(map(str, READABLE_VERSIONS))}); rebuild it with `igraph-fight build`")
@@ -485,9 +574,10 @@ def _check_compact_index(header: dict, size: int, data_start: int, name: str) ->
     if fmt != FORMAT:
         raise GraphFormatError(name, f"not an igraph-fight graph file (format {_quote(fmt)})")
     v = header.get("version")
-    if isinstance(v, bool) or v != 3:
+    if isinstance(v, bool) or v not in COMPACT_VERSIONS:
         raise GraphFormatError(name, f"version: graph version {_quote(v)} is not supported in a compact file "
-                                     f"(version 3)")
+                                     f"(versions {' and '.join(map(str, COMPACT_VERSIONS))}); a newer package "
+                                     f"wrote it, or convert it there with `igraph-fight graph convert --version 3`")
     members = header.get("members")
     if not isinstance(members, dict):
         raise GraphFormatError(name, "members: not an object")
@@ -500,9 +590,12 @@ def _check_compact_index(header: dict, size: int, data_start: int, name: str) ->
     need = 0
     for k, m in members.items():
         try:
-            need += gc.check_spec(k, m, np.dtype(ALL_ARRAYS.get(k, np.uint8)), size, data_start, DERIVED)
+            need += gc.check_spec(k, m, np.dtype(ALL_ARRAYS.get(k, np.uint8)), size, data_start,
+                                  {f: t for f, (t, _) in FORMULAS.items()})
         except gc.FormatProblem as e:
             raise GraphFormatError(name, str(e)) from None
+        if m.get("encoding") == "derived" and m.get("formula") != k and "library_npz" not in members:
+            raise GraphFormatError(name, f"{k}: replayed, and the file holds no library to replay it with")
         if m["encoding"] == "offsets" and k != "state_offsets":
             raise GraphFormatError(name, f"{k}: only state_offsets may be stored as offsets")
     budget = gc.MAX_INFLATION * size + gc.INFLATION_SLACK
@@ -544,7 +637,10 @@ def _read_compact(path: str) -> tuple[dict, GraphArrays]:
             (members if isinstance(x, Member) else loaded)[k] = x
     except gc.FormatProblem as e:
         raise GraphFormatError(path, str(e)) from None
-    return header, GraphArrays(loaded, members, DERIVED, order=list(header["members"]))
+    arrays = GraphArrays(loaded, members, {f: fn for f, (_, fn) in FORMULAS.items()}, order=list(header["members"]),
+                         error=lambda problem: GraphFormatError(path, problem))
+    arrays.context["header"] = header
+    return header, arrays
 
 
 def read_graph_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
@@ -822,9 +918,11 @@ class InteractionGraph:
         return {
             "path": path,
             "format": self.header.get("format", FORMAT), "version": version,
-            "storage": ("compact (version 3: memory-mapped floats, narrowed and deflated integers and tables)"
+            "storage": ("compact (version 4: edge features replayed from the states; memory-mapped floats, "
+                        "narrowed and deflated integers and tables)" if version >= 4 else
+                        "compact (version 3: memory-mapped floats, narrowed and deflated integers and tables)"
                         if version >= 3 else f"npz (version {version}, the old format: `igraph-fight graph convert` "
-                                             f"rewrites it as version 3)"),
+                                             f"rewrites it as version 4)"),
             "file_bytes": os.path.getsize(path) if path and os.path.exists(path) else None,
             "package_version": self.header.get("package_version"), "created": self.header.get("created"),
             "seed": self.header.get("seed"), "library_fingerprint": self.library_fingerprint,
@@ -868,7 +966,8 @@ class InteractionGraph:
     # ----- persistence ----------------------------------------------------------------------
     def save(self, path: str | os.PathLike, version: int = VERSION) -> None:
         """Write the graph file atomically, after ``validate()`` (a graph that saves loads):
-        version 3 (the default: compact) or 2 (the .npz that older packages read)."""
+        version 4 (the default: compact, edge features replayed), 3 (compact, every array stored)
+        or 2 (the .npz that older packages read)."""
         if version not in WRITABLE_VERSIONS:
             raise ValueError(f"graph files are written as version {' or '.join(map(str, WRITABLE_VERSIONS))}, "
                              f"not {version!r}")
@@ -885,7 +984,8 @@ class InteractionGraph:
             header["report"] = _finite_or_none(header["report"])
         header = json.loads(json.dumps(header, allow_nan=False))  # as load will parse it
         if version >= 3:
-            written = write_compact(path, header, arrays)
+            lib = self.load_library() if "library_npz" in arrays else None
+            written = write_compact(path, header, arrays, version=version, library=lib)
             self.header = {**written, "path": str(path)}
             return
         header["checksum"] = graph_checksum(header, arrays, version)
@@ -913,20 +1013,28 @@ class InteractionGraph:
         g = cls(data, header)
         _check_header(header, data, path)  # before the library is parsed with the header's fingerprint
         if "library_npz" in data:
-            g.load_library()  # validates the library, then the graph against it
+            lib = g.load_library()  # validates the library, then the graph against it
+            if isinstance(data, GraphArrays):
+                data.context["library"] = lib  # what a replay of the edges uses
         else:
             g.validate()
         return g
 
 
-def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray]) -> dict[str, dict]:
-    """The member specs of a version 3 file for ``arrays`` (their blobs added to ``w``): see the
-    module docstring for which array is stored how."""
+def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray],
+                    replay: dict[str, np.ndarray] | None = None) -> dict[str, dict]:
+    """The member specs of a version 3 file for ``arrays`` (their blobs added to ``w``), or of a
+    version 4 file with ``replay`` (replayed_arrays of ``arrays``): see the module docstring for
+    which array is stored how."""
     members = {}
     for k in [*ALL_ARRAYS, *(("library_npz",) if "library_npz" in arrays else ())]:
         a = np.ascontiguousarray(arrays[k])
         spec = None
-        if k == "state_offsets":
+        if replay is not None and k in replay and np.shape(replay[k]) == a.shape:
+            spec = gc.encode_derived(w, a, replay_formula(k), replay[k], crc=True)
+        if spec is not None:
+            pass
+        elif k == "state_offsets":
             spec = gc.encode_offsets(w, a)
         elif k in DERIVED:
             try:
@@ -947,17 +1055,26 @@ def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray]) -> dict[str, 
     return members
 
 
-def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray]) -> dict:
-    """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a version 3 file, atomically,
-    without validating them; returns the index written (the header with ``members`` and
-    ``checksum``). ``save`` is the way to write a graph; this is what it calls."""
+def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray], version: int = VERSION,
+                  library=None) -> dict:
+    """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a compact file of ``version``
+    (3 or 4), atomically, without validating them; returns the index written (the header with
+    ``members`` and ``checksum``). Version 4 replays the edges with ``library`` (default: the
+    embedded one) where it can (replayed_arrays). ``save`` is the way to write a graph; this is
+    what it calls."""
+    if version not in COMPACT_VERSIONS:
+        raise ValueError(f"compact graph files are versions {COMPACT_VERSIONS}, not {version!r}")
+    replay = None
+    if version >= 4 and ("library_npz" in arrays or library is not None):
+        replay = replayed_arrays(arrays, header, library)
+        replay = replay if isinstance(replay, dict) else None
     w = gc.Writer()
-    header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": 3,
-              "members": compact_members(w, arrays)}
+    header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": version,
+              "members": compact_members(w, arrays, replay)}
     out: dict = {}
 
     def write(fh) -> None:
-        out.update(w.finish(fh, header, lambda h: graph_checksum(h, {}, 3)))
+        out.update(w.finish(fh, header, lambda h: graph_checksum(h, {}, version)))
         fh.flush()
         kill_point("write")
 

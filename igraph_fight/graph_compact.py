@@ -1,4 +1,4 @@
-"""The compact graph file container (graph file version 3): an index, then 64-byte aligned blobs.
+"""The compact graph file container (graph file versions 3 and 4): an index, then 64-byte aligned blobs.
 
 Layout (all integers little-endian)::
 
@@ -26,13 +26,15 @@ dtype (what the graph's arrays hold in memory) and one of these encodings:
 - ``"offsets"``: ``data`` holds the n - 1 differences of a non-decreasing array that starts at 0
   (CSR offsets): array = [0, cumsum(data)].
 - ``"derived"``: the array is ``formula(arrays)`` (a function the reader is given by name, see
-  igraph_fight.graph.DERIVED), except at the positions whose bit is set in ``mask`` (a blob of
-  ceil(n / 8) uint8, numpy.packbits order), which take the ``data`` values in order.
+  igraph_fight.graph.FORMULAS; each formula yields one array), except at the positions whose bit
+  is set in ``mask`` (a blob of ceil(n / 8) uint8, numpy.packbits order), which take the ``data``
+  values in order. An optional ``crc32`` (version 4 writes it) is zlib.crc32 of the decoded
+  array's bytes: a reader whose formula gives other bits refuses the array instead of using it.
 
 Reading is bounded before anything is inflated or allocated: the index at most ``max_index``
 bytes of strict JSON, every blob inside the file, raw blobs aligned, the dtypes plain numbers,
 and the arrays decoded from the file at most MAX_INFLATION times the file's size (+1 MiB) all
-together. Every blob's CRC-32 is checked on load. Arrays other than raw ones are decoded on first
+together. Every blob's CRC-32 is checked on load, a derived array's ``crc32`` once it is decoded. Arrays other than raw ones are decoded on first
 access (GraphArrays); what validation needs (the stored integers, the tables' values, the
 exceptions of derived arrays) is read on load.
 
@@ -54,7 +56,7 @@ import numpy as np
 MAGIC = b"IGFGRAPH"
 ALIGN = 64
 #: decoded arrays (and inflated blobs) of a file at most this many times its size, plus 1 MiB
-MAX_INFLATION = 16
+MAX_INFLATION = 32
 INFLATION_SLACK = 1 << 20
 #: dtypes a blob may hold (little-endian plain numbers)
 BLOB_DTYPES = ("|u1", "<u2", "<u4", "<u8", "|i1", "<i2", "<i4", "<i8", "<f4", "<f8")
@@ -206,19 +208,28 @@ def encode_offsets(w: Writer, a: np.ndarray) -> dict | None:
             "data": w.blob(d.astype(narrow_dtype(d)), True)}
 
 
-def encode_derived(w: Writer, a: np.ndarray, formula: str, derived: np.ndarray) -> dict | None:
+def encode_derived(w: Writer, a: np.ndarray, formula: str, derived: np.ndarray, crc: bool = False) -> dict | None:
     """``a`` as ``formula`` of the other arrays (``derived``: its value) and the values where the
-    two differ bit for bit; None when they differ at more than half the positions."""
+    two differ bit for bit; None when they differ at more than half the positions. ``crc``: record
+    the CRC-32 of ``a``'s bytes, which the reader checks after decoding."""
     diff = a.view(np.uint8).reshape(len(a), -1) != derived.astype(a.dtype).view(np.uint8).reshape(len(a), -1)
     diff = diff.any(axis=1) if len(a) else np.zeros(0, dtype=bool)
     n_exc = int(diff.sum())
     if n_exc > len(a) // 2:
         return None
     spec = {"encoding": "derived", "formula": formula, "dtype": dtype_name(a.dtype), "shape": list(a.shape)}
+    if crc:
+        spec["crc32"] = value_crc32(a)
     if n_exc:
         spec["mask"] = w.blob(np.packbits(diff), True)
         spec["data"] = w.blob(a[diff], False)
     return spec
+
+
+def value_crc32(a: np.ndarray) -> int:
+    """zlib.crc32 of an array's little-endian bytes in its own dtype."""
+    a = np.ascontiguousarray(a)
+    return zlib.crc32(memoryview(a.astype(dtype_name(a.dtype), copy=False)).cast("B")) if a.nbytes else 0
 
 
 # ----- reading -----------------------------------------------------------------------------------
@@ -283,24 +294,35 @@ class Member:
             np.cumsum(self.stored, out=out[1:], dtype=dt)
             return out
         out = np.ascontiguousarray(formulas[self.spec["formula"]](arrays), dtype=dt)
+        if out.shape != self.shape:
+            raise FormatProblem(f"{self.name}: its formula gives {out.shape[0] if out.ndim else 0} values, not "
+                                f"{self.shape[0]}")
         if self.mask is not None and self.stored is not None and len(self.stored):
             out = out.copy() if not out.flags.writeable else out
             out[self.mask] = self.stored
+        if "crc32" in self.spec and value_crc32(out) != self.spec["crc32"]:
+            raise FormatProblem(f"{self.name}: {self.spec['formula']} gives other values on this machine than "
+                                f"where the file was written (CRC-32 mismatch)")
         return out
 
 
 class GraphArrays(MutableMapping):
     """A graph's arrays by name, in their canonical dtypes. Arrays of a compact file other than the
     memory-mapped ones are Members, decoded on first access (thread-safe) and then kept; ``peek``
-    gives either without decoding. Pickles as a plain dict of decoded arrays."""
+    gives either without decoding. Pickles as a plain dict of decoded arrays. A problem found
+    while decoding (a FormatProblem) is raised as ``error(problem)`` when ``error`` is given;
+    ``context`` is for the formulas (what they share, e.g. a parsed library)."""
 
     def __init__(self, arrays: dict[str, np.ndarray], members: dict[str, Member] | None = None,
-                 formulas: dict[str, Callable] | None = None, order: list[str] | None = None) -> None:
+                 formulas: dict[str, Callable] | None = None, order: list[str] | None = None,
+                 error: Callable[[str], Exception] | None = None) -> None:
         self._arrays = dict(arrays)
         self._members = dict(members or {})
         self._formulas = dict(formulas or {})
         self._order = list(order) if order is not None else [*self._arrays, *self._members]
         self._lock = threading.RLock()
+        self._error = error
+        self.context: dict = {}
 
     def peek(self, name: str) -> np.ndarray | Member:
         """The decoded array, or the Member when it is not decoded yet (KeyError if neither)."""
@@ -315,7 +337,12 @@ class GraphArrays(MutableMapping):
             a = self._arrays.get(name)
             if a is None:
                 m = self._members[name]
-                a = m.decode(self, self._formulas)
+                try:
+                    a = m.decode(self, self._formulas)
+                except FormatProblem as e:
+                    if self._error is None:
+                        raise
+                    raise self._error(str(e)) from None
                 self._arrays[name] = a
                 del self._members[name]
         return a
@@ -378,13 +405,14 @@ def _q(v) -> str:
     return s if len(s) <= 60 else s[:57] + "..."
 
 
-def check_spec(name: str, m, canonical: np.dtype, size: int, data_start: int, formulas) -> int:
-    """Vet a member spec (nothing read); returns the bytes its decoding allocates."""
+def check_spec(name: str, m, canonical: np.dtype, size: int, data_start: int, formulas: dict[str, str]) -> int:
+    """Vet a member spec (nothing read); returns the bytes its decoding allocates. ``formulas``:
+    the formula names a derived member may use, each mapped to the array it yields."""
     if not isinstance(m, dict) or m.get("encoding") not in ENCODINGS:
         raise FormatProblem(f"{name}: encoding {_q(m.get('encoding') if isinstance(m, dict) else m)} is not one of "
                             f"{', '.join(ENCODINGS)}")
     enc = m["encoding"]
-    allowed = {"encoding", "dtype", "shape", "data", "copy", "values", "formula", "mask"}
+    allowed = {"encoding", "dtype", "shape", "data", "copy", "values", "formula", "mask", "crc32"}
     if set(m) - allowed:
         raise FormatProblem(f"{name}: unexpected key {_q(sorted(set(m) - allowed)[0])}")
     if m.get("dtype") != dtype_name(canonical):
@@ -401,6 +429,8 @@ def check_spec(name: str, m, canonical: np.dtype, size: int, data_start: int, fo
             if b["compression"] == "deflate":
                 need += b["count"] * _dt(b["dtype"]).itemsize
     data = m.get("data")
+    if "crc32" in m and enc != "derived":
+        raise FormatProblem(f"{name}: unexpected key 'crc32'")
     if enc != "derived" and data is None:
         raise FormatProblem(f"{name}: no data")
     if enc == "raw":
@@ -422,8 +452,11 @@ def check_spec(name: str, m, canonical: np.dtype, size: int, data_start: int, fo
         if canonical.kind not in "iu" or _dt(data["dtype"]).kind not in "iu" or data["count"] != max(n - 1, 0) or n < 1:
             raise FormatProblem(f"{name}: offset differences of {data['count']} {data['dtype']} for {n} offsets")
     else:  # derived
-        if m.get("formula") != name or name not in formulas:
-            raise FormatProblem(f"{name}: formula {_q(m.get('formula'))} is not known")
+        f = m.get("formula")
+        if not isinstance(f, str) or formulas.get(f) != name:
+            raise FormatProblem(f"{name}: formula {_q(f)} is not known")
+        if "crc32" in m and not _int(m["crc32"], 0, 0xFFFFFFFF):
+            raise FormatProblem(f"{name}: crc32 {_q(m['crc32'])} is not a CRC-32")
         if ("mask" in m) != ("data" in m):
             raise FormatProblem(f"{name}: a mask needs its data and data its mask")
         if "mask" in m and (m["mask"]["dtype"] != "|u1" or m["mask"]["count"] != (n + 7) // 8

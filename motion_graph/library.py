@@ -715,7 +715,11 @@ class ClipResult:
 def segment_file(path: str | os.PathLike, params: LibraryParams = LibraryParams(),
                  fps_override: float | None = None) -> ClipResult:
     """Load one file, find its strikes, cut it into actions and annotate them."""
-    m = load_motion(path, fps=fps_override)
+    return segment_motion(load_motion(path, fps=fps_override), path, params)
+
+
+def segment_motion(m: Motion, path: str | os.PathLike, params: LibraryParams = LibraryParams()) -> ClipResult:
+    """Find a loaded motion's strikes, cut it into actions and annotate them (``path``: its source)."""
     feat = clip_features(m, params.part_overrides)
     strikes = detect_strikes(feat, params.strikes)
     seg = segment_clip(feat, strikes, params.segment)

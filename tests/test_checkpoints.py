@@ -186,7 +186,8 @@ def test_shipped_checkpoints_load_weights_only_with_their_formats():
                 "igraph_fight/checkpoints/rl_outboxer.pt": (RL_FORMAT, RL_VERSION),
                 "tracker/checkpoints/boxing_cmu13.pt": ("igraph-fight/tracker-policy", 2),
                 "tracker/checkpoints/physics_rl_cmu13.pt": ("igraph-fight/physics-rl", 1),
-                "tracker/checkpoints/hit_model_cmu13.pt": ("igraph-fight/hit-model", 1)}
+                "tracker/checkpoints/hit_model_cmu13.pt": ("igraph-fight/hit-model", 1),
+                "tracker/checkpoints/assisted_cmu13.pt": ("igraph-fight/assisted-tracker", 1)}
     found = sorted(str(p.relative_to(ROOT)) for d in ("igraph_fight/checkpoints", "tracker/checkpoints")
                    for p in (ROOT / d).glob("*.pt"))
     assert found == sorted(expected)

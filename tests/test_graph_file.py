@@ -2,7 +2,8 @@
 LibraryFormatError) naming the field, memory stays bounded, and the CLI exits 2 without a
 traceback. Crafted files carry a checksum recomputed by the attacker (a sha256 anyone can
 recompute), so only the value checks stand between them and the numba kernels. Every case runs
-on the .npz versions 1 and 2 and on the compact version 3 (igraph_fight.graph_compact)."""
+on the .npz versions 1 and 2 and on the compact versions 3 and 4 (igraph_fight.graph_compact;
+version 4 replays the edge features)."""
 from __future__ import annotations
 
 import dataclasses
@@ -30,7 +31,7 @@ from motion_graph.library import library_from_bytes, load_library
 ROOT = Path(__file__).resolve().parent.parent
 
 
-VERSIONS = [1, 2, 3]
+VERSIONS = [1, 2, 3, 4]
 
 
 # ---- crafting files as an attacker would ---------------------------------------------------------
@@ -53,9 +54,9 @@ def savez(path: Path, **arrays: np.ndarray) -> None:
 
 def write_graph(path: Path, header: dict, arrays: dict[str, np.ndarray], version: int = 2) -> Path:
     """A graph file with ``header`` and ``arrays`` and a valid checksum of ``version``'s rule
-    (version 3: igraph_fight.graph.write_compact, which writes what it is given unchecked)."""
-    if version == 3:
-        write_compact(path, header, arrays)
+    (versions 3 and 4: igraph_fight.graph.write_compact, which writes what it is given unchecked)."""
+    if version in (3, 4):
+        write_compact(path, header, arrays, version=version)
         return path
     header = {**header, "version": version}
     header["checksum"] = graph_checksum(header, arrays, version)
@@ -386,6 +387,60 @@ def test_table_codes_and_derived_exceptions_are_checked(raw, tmp_path):
         InteractionGraph.load(path)
 
 
+def test_version_4_replays_the_edge_features_exactly(raw, tmp_path):
+    from igraph_fight.graph import REPLAYED, replay_formula
+    v3, v4 = crafted(tmp_path, raw, 3, name="v3.igz"), crafted(tmp_path, raw, 4, name="v4.igz")
+    members = read_index(v4)[0]["members"]
+    for k in REPLAYED:  # no exception stored: the replay gives every bit
+        assert members[k]["encoding"] == "derived" and members[k]["formula"] == replay_formula(k), k
+        assert "mask" not in members[k] and "data" not in members[k] and "crc32" in members[k], k
+    assert v4.stat().st_size < v3.stat().st_size
+    g3, g4 = InteractionGraph.load(v3), InteractionGraph.load(v4)
+    for k in ALL_ARRAYS:
+        x, y = g3.arrays[k], g4.arrays[k]
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), k
+    assert g4.content_hash == g3.content_hash == g4.header["content_hash"]
+
+
+def test_replayed_members_are_checked(raw, tmp_path):
+    crc = read_index(crafted(tmp_path, raw, 4))[0]["members"]["feat_r_mean"]["crc32"]
+    cases = {
+        "crc": (lambda ix: ix["members"]["feat_r_mean"].update(crc32=crc ^ 1), None),
+        "crc_type": (lambda ix: ix["members"]["feat_r_mean"].update(crc32="x"), "feat_r_mean: crc32 'x' is not"),
+        "crc_on_raw": (lambda ix: ix["members"]["state_r"].update(crc32=1), "state_r: unexpected key 'crc32'"),
+        "other_array": (lambda ix: ix["members"]["feat_r"].update(formula="replay/feat_r_mean"),
+                        "feat_r: formula 'replay/feat_r_mean' is not known"),
+        "no_library": (lambda ix: ix["members"].pop("library_npz"),
+                       "feat_r: replayed, and the file holds no library to replay it with"),
+    }
+    for case, (edit, match) in cases.items():
+        path = reseal(crafted(tmp_path, raw, 4, name=f"{case}.igz"), edit)
+        if match is not None:
+            with pytest.raises(GraphFormatError, match=rf"{case}\.igz: {match}") as err:
+                InteractionGraph.load(path)
+            one_line(err.value)
+            continue
+        g = InteractionGraph.load(path)  # decoded on first access: refused then, naming the file
+        with pytest.raises(GraphFormatError, match=rf"{case}\.igz: feat_r_mean: replay/feat_r_mean gives other "
+                                                    r"values .* \(CRC-32 mismatch\)") as err:
+            g.arrays["feat_r_mean"]
+        one_line(err.value)
+
+
+def test_the_replay_checks_what_it_indexes(raw, lib):
+    from igraph_fight.graph import replayed_arrays
+    h, a = raw
+    assert isinstance(replayed_arrays(a, h), dict)
+    bad = {"edge_action": np.full_like(a["edge_action"], lib.n_actions),
+           "state_m_other": np.full_like(a["state_m_other"], -1),
+           "state_f_other": np.full_like(a["state_f_other"], 1 << 30),
+           "state_offsets": a["state_offsets"][::-1].copy()}
+    for k, v in bad.items():
+        why = replayed_arrays({**a, k: v}, h)
+        assert isinstance(why, str) and why.startswith(f"cannot replay the edges ({k}: "), (k, why)
+    assert "lacks" in replayed_arrays({k: v for k, v in a.items() if k != "library_npz"}, h)
+
+
 def test_compact_header_json_is_strict_and_capped(raw, tmp_path):
     for text, match in ((b'{"format": NaN}', "header: not valid JSON"), (b'{"seed": 1e400}', "not a finite number"),
                         (b"[1, 2]", "header: not a JSON object"), (b'{"a": 1, "a": 2}', "duplicate key 'a'"),
@@ -433,12 +488,12 @@ def test_build_writes_the_compact_format_and_convert_goes_both_ways(raw, tmp_pat
     from igraph_fight.cli import main
 
     g = InteractionGraph.load(tiny_graph_file)
-    assert g.header["version"] == 3 and header_summary(tiny_graph_file)["version"] == 3
+    assert g.header["version"] == 4 and header_summary(tiny_graph_file)["version"] == 4
     want = g.content_hash
     old = crafted(tmp_path, raw, 2, name="old.igz")
     assert main(["graph", "convert", str(old), str(tmp_path / "new.igz"), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["src_version"] == 2 and rep["dst_version"] == 3 and rep["content_hash"] == want
+    assert rep["src_version"] == 2 and rep["dst_version"] == 4 and rep["content_hash"] == want
     new = InteractionGraph.load(tmp_path / "new.igz")
     assert new.content_hash == want and new.header["content_hash"] == want
     back = tmp_path / "back.igz"
@@ -450,7 +505,11 @@ def test_build_writes_the_compact_format_and_convert_goes_both_ways(raw, tmp_pat
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), k
     assert main(["graph", "info", str(tmp_path / "new.igz")]) == 0
     out = capsys.readouterr().out
-    assert "file: compact (version 3" in out and f"content hash {want}" in out
+    assert "file: compact (version 4" in out and f"content hash {want}" in out
+    v3 = tmp_path / "v3.igz"
+    assert main(["graph", "convert", str(tmp_path / "new.igz"), str(v3), "--version", "3"]) == 0
+    capsys.readouterr()
+    assert InteractionGraph.load(v3).header["version"] == 3 and InteractionGraph.load(v3).content_hash == want
     assert main(["graph", "info", str(old)]) == 0
     assert "file: npz (version 2, the old format" in capsys.readouterr().out
 

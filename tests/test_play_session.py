@@ -280,13 +280,13 @@ def test_the_demo_graph_is_built_once_and_reused(boxing_files, tmp_path, monkeyp
     assert "building" in out3.getvalue() and p.stat().st_mtime_ns != mtime
 
 
-def test_cli_play_refuses_physics_and_says_how_to_install_three(tmp_path, monkeypatch, capsys):
+def test_cli_play_checks_its_options_and_says_how_to_install_three(tmp_path, monkeypatch, capsys):
     from igraph_fight.cli import build_parser, main
     from igraph_fight.play import server
 
-    assert main(["play", "--physics"]) == 2
+    assert main(["play", "--tracker", "pd"]) == 2            # --tracker without --physics
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "not available yet" in err and "assisted-physics tracker" in err
+    assert err.count("\n") == 0 and "--physics" in err
     msg = server.web_assets_missing(tmp_path)
     assert msg is not None and server.NPM_STEP in msg
     monkeypatch.setattr(server, "web_assets_missing", lambda web_dir=None: msg)

@@ -34,3 +34,25 @@ def test_decision_context_answers_legal_actions():
     assert ctx.legal_actions(1) is menu
     with pytest.raises(ValueError):
         ctx.legal_actions(0)
+
+
+@pytest.mark.realdata
+def test_ground_report_puts_the_lower_foot_on_the_floor(capsys, boxing_library_file):
+    import json
+    assert main(["tracker", "ground", "--library", boxing_library_file, "--walks", "2", "--actions", "4",
+                 "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["before"]["lower_foot_p90_cm"] > 1.5                   # the captured feet float ...
+    assert abs(rep["after"]["lower_foot_median_cm"]) <= 1.0            # ... the grounded ones stand
+    assert rep["after"]["both_up_share"] < 0.1 < rep["before"]["both_up_share"]
+
+
+def test_loader_default_is_the_assisted_tracker_when_shipped(monkeypatch):
+    from tracker.bouts.loaders import load_tracker
+    from tracker.track.assisted_policy import DEFAULT_ASSISTED_CKPT
+    monkeypatch.delenv("IGRAPH_FIGHT_TRACKER", raising=False)
+    if not DEFAULT_ASSISTED_CKPT.is_file():
+        pytest.skip("no shipped assisted tracker")
+    trk = load_tracker(None)
+    assert trk.name == "learned" and not trk.assist_off and "assisted" in trk.describe()
+    assert load_tracker("assisted-off").assist_config().label() == "physics (no assist)"

@@ -95,9 +95,19 @@ def register(subparsers) -> None:
     ta.add_argument("--out", required=True, help="checkpoint to write (.pt), atomically, every few minutes and at the end")
     ta.add_argument("--resume", help="continue from this checkpoint (its config, optimiser, curriculum and budget)")
     ta.add_argument("--set", action="append", metavar="KEY=VALUE",
-                    help="override an AssistedTrainConfig field (repeatable), e.g. --set n_envs=16")
+                    help="override an AssistedTrainConfig field (repeatable; on --resume it replaces the stored "
+                         "value, cap_start restarts the cap curriculum there), e.g. --set n_envs=16")
     ta.add_argument("--no-progress", action="store_true", help="no progress bar")
     ta.set_defaults(func=cmd_train_assisted)
+
+    gr = sub.add_parser("ground", help="the grounded reference: foot float and penetration before and after grounding",
+                        description="Build the protocol's walk references and report the lower foot's height "
+                                    "(as captured on the model, then grounded by tracker.track.grounding), the share "
+                                    "of frames with both feet more than 1.5 cm up and the penetration.")
+    source_args(gr)
+    gr.add_argument("--walks", type=positive_int, default=20, help="number of walks (default 20)")
+    gr.add_argument("--json", action="store_true", help="print the statistics as JSON")
+    gr.set_defaults(func=cmd_ground)
 
     m = sub.add_parser("model", help="write the generated MJCF of a skeleton (calibrated on the file's motion)")
     m.add_argument("file", help=".bvh or .amc file")
@@ -225,6 +235,37 @@ def _eval_batched(args) -> int:
     return 0
 
 
+def cmd_ground(args) -> int:
+    """`tracker ground`: floor statistics of the protocol's walk references, before and after grounding."""
+    import numpy as np
+
+    from tracker.track.evaluation import draw_walks, make_setup, walk_reference
+    from tracker.track.grounding import floor_report
+    from tracker.track.pd import batched_model_options
+    from tracker.track.walks import walk_source
+    src = walk_source(args.library, args.mocap, args.clips)
+    setup = make_setup(src, batched_model_options(120.0))
+    before, after = [], []
+    for walk in draw_walks(src, args.walks, args.actions, args.seed):
+        ref = walk_reference(setup, walk, lift="ground")[1]
+        off = np.asarray(ref.meta["ground_offset_m"])
+        feet1 = np.asarray(ref.meta["feet_after_m"])
+        before.append(feet1 - off[:, None])
+        after.append(feet1)
+    rep = {"walks": args.walks, "actions": args.actions, "seed": args.seed,
+           "before": floor_report(np.concatenate(before)), "after": floor_report(np.concatenate(after))}
+    if args.json:
+        print(json.dumps(rep, indent=2))
+        return 0
+    print(f"{args.walks} walks of {args.actions} actions (seed {args.seed}); lower foot height, frames with both feet "
+          "up > 1.5 cm, penetration (cm):")
+    for k, name in (("before", "as captured"), ("after", "grounded")):
+        r = rep[k]
+        print(f"  {name:11s}  median {r['lower_foot_median_cm']:5.2f}  p90 {r['lower_foot_p90_cm']:5.2f}  both up "
+              f"{100 * r['both_up_share']:4.0f}%  penetration p95 {r['penetration_p95_cm']:.2f} max {r['penetration_max_cm']:.2f}")
+    return 0
+
+
 def cmd_render(args) -> int:
     from pathlib import Path
 
@@ -286,11 +327,13 @@ def cmd_train_assisted(args) -> int:
         print("igraph-fight tracker train-assisted: --minutes must be positive", file=sys.stderr)
         return 2
     try:
-        cfg = AssistedTrainConfig(**parse_config_overrides(args.set or [], AssistedTrainConfig))
+        overrides = parse_config_overrides(args.set or [], AssistedTrainConfig)
+        cfg = AssistedTrainConfig(**overrides)
     except ValueError as e:
         print(f"igraph-fight tracker train-assisted: {e}", file=sys.stderr)
         return 2
-    r = train(args.out, args.minutes, cfg, library=args.library, resume=args.resume, progress=not args.no_progress)
+    r = train(args.out, args.minutes, cfg, library=args.library, resume=args.resume, progress=not args.no_progress,
+              overrides=overrides)
     b = r["budget"]
     print(f"wrote {r['out']} (and {r['out']}.png): {b['samples'] / 1e6:.2f}M samples, {b['cpu_s'] / 3600:.2f} CPU-hours "
           f"over {b['runs']} run(s), assist cap now {r['cap']:.3f} mg")

@@ -38,8 +38,9 @@ def register(sub) -> None:
                    help="physics: which way a fallen fighter faces when it gets up: towards the opponent "
                         "(default) or its fighting direction at the fall")
     p.add_argument("--tracker", default=None,
-                   help="physics: tracking controller: a policy checkpoint or 'pd'; default $IGRAPH_FIGHT_TRACKER "
-                        "or the shipped policy")
+                   help="physics: tracking controller: assisted[:CKPT] (default, or $IGRAPH_FIGHT_TRACKER: the "
+                        "shipped learned tracker, assisted physics with a bounded, reported balance wrench), "
+                        "assisted-off[:CKPT] (plain physics), pd-fixed[=CAP], pd-batch, legacy[:CKPT] or pd")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd_fight)
 

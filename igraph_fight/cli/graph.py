@@ -78,13 +78,14 @@ def register(sub) -> None:
     q.add_argument("file")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.set_defaults(func=cmd_info)
-    q = gsub.add_parser("convert", help="rewrite a graph file in the compact format (version 3), or back to 2",
-                        description="Load a graph file of any version (validated) and write it as version 3 (the "
-                                    "compact format `igraph-fight build` writes) or, with --version 2, as the old "
-                                    ".npz format. The content hash stays.")
+    q = gsub.add_parser("convert", help="rewrite a graph file in the compact format (version 4), or as 3 or 2",
+                        description="Load a graph file of any version (validated) and write it as version 4 (the "
+                                    "compact format `igraph-fight build` writes: edge features replayed from the "
+                                    "states), with --version 3 as the compact format that stores every array, or "
+                                    "with --version 2 as the old .npz format. The content hash stays.")
     q.add_argument("src", help="graph file to read")
     q.add_argument("dst", help="graph file to write (may be SRC: replaced atomically)")
-    q.add_argument("--version", type=int, choices=(2, 3), default=3, help="version to write (default 3)")
+    q.add_argument("--version", type=int, choices=(2, 3, 4), default=4, help="version to write (default 4)")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.set_defaults(func=cmd_convert)
     q = gsub.add_parser("export", help="export to GraphML (networkx) for analysis")

@@ -31,6 +31,10 @@ def register(sub) -> None:
     p.add_argument("--library-fps", type=positive_float, default=30.0, help="frame rate of the library (default 30)")
     p.add_argument("--next-threshold", type=positive_float, default=None,
                    help="pose-hub size (m): boundary poses within this mean joint distance share a hub, and a -> b when b starts in the hub where a ends (default 0.20)")
+    p.add_argument("--retarget", action="store_true",
+                   help="map takes of different skeletons onto one body (the first take's) before segmenting")
+    p.add_argument("--target-skeleton", default=None, metavar="FILE",
+                   help="with --retarget (implied): the mocap file whose skeleton and frame rate are the target")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_segment)
 
@@ -106,8 +110,17 @@ def cmd_segment(args: argparse.Namespace) -> int:
     params = LibraryParams(fps=args.library_fps)
     if args.next_threshold is not None:
         params = dataclasses.replace(params, next_threshold_m=args.next_threshold)
-    clips = segment_files(files, params, progress=not args.json and sys.stderr.isatty(), fps_override=args.fps)
+    progress = not args.json and sys.stderr.isatty()
+    retarget_report = None
+    if args.retarget or args.target_skeleton:
+        from motion_graph.retarget import segment_retargeted
+        clips, target, takes = segment_retargeted(files, params, args.target_skeleton, progress, args.fps)
+        retarget_report = {"target": target.source, "target_fps": target.fps, "takes": takes}
+    else:
+        clips = segment_files(files, params, progress=progress, fps_override=args.fps)
     lib = library_from_clips(clips, params, args.labels)
+    if retarget_report is not None:
+        lib.meta["retarget"] = retarget_report
     if args.out:
         lib.save(args.out)
     if args.plot:
@@ -143,6 +156,9 @@ def cmd_segment(args: argparse.Namespace) -> int:
         "duration_s": sum(c.motion.duration for c in clips), "seconds": round(seconds, 2),
         "library": args.out, "plot": args.plot, "actions": actions,
     }
+    if retarget_report is not None:
+        summary["retarget"] = retarget_report
+        summary["largest_scc_size"] = rep["largest_scc_size"]
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -152,6 +168,11 @@ def cmd_segment(args: argparse.Namespace) -> int:
     print(f"attacks {summary['n_attacks']}, defences {summary['n_defences']}; action graph: "
           f"mean out-degree {rep['mean_out_degree']:.1f}, largest SCC {100 * rep['largest_scc_fraction']:.0f}%, "
           f"worst transition residual {100 * rep['worst_transition_residual_m']:.1f} cm")
+    if retarget_report is not None:
+        print(f"retargeted onto {retarget_report['target']} ({retarget_report['target_fps']:g} fps): " + "; ".join(
+            f"{Path(k).name} leg scale {v['leg_scale']:.3f}" + (f", identity for {', '.join(v['unmatched'])}"
+                                                               if v["unmatched"] else "")
+            for k, v in retarget_report["takes"].items()))
     print(f"{'id':>3} {'label':<13} {'source':<12} {'frames':>11} {'dur':>5} {'dx':>6} {'dz':>6} {'dhead':>6}")
     for r in actions:
         print(f"{r['id']:>3} {r['label']:<13} {Path(r['source']).name:<12} {r['start_frame']:>5}-{r['end_frame']:<5} "

@@ -22,14 +22,25 @@ def register(sub) -> None:
                    help="what your fighter does without a command: guard (default) or the graph's best action")
     p.add_argument("--save-dir", default="out/play", help="where bouts are saved (default out/play; the human logs "
                    "of `igraph-fight evaluate --human-logs`)")
-    p.add_argument("--physics", action="store_true", help="physics play (not available yet)")
+    p.add_argument("--physics", action="store_true",
+                   help="both fighters simulated in MuJoCo on the server, tracked by the default physics tracker "
+                        "(the learned assisted tracker: assisted physics, its cap and measured assist in the HUD); "
+                        "physics bouts are not saved")
+    p.add_argument("--tracker", default=None, help="with --physics: the tracking controller (as `fight --physics`)")
     p.set_defaults(func=cmd_play)
 
 
 def cmd_play(args: argparse.Namespace) -> int:
+    physics = None
     if args.physics:
-        print("igraph-fight: error: play --physics is not available yet: needs the assisted-physics tracker",
-              file=sys.stderr)
+        from igraph_fight.cli import PHYSICS_GROUP, plugin
+        factory = plugin(PHYSICS_GROUP, "play")
+        if factory is None:
+            print("igraph-fight: error: play --physics needs the tracker package (not installed)", file=sys.stderr)
+            return 2
+        physics = (lambda lib, sp: factory(lib, sp, args.tracker))  # noqa: E731
+    elif args.tracker is not None:
+        print("igraph-fight: error: --tracker applies to --physics only", file=sys.stderr)
         return 2
     from igraph_fight.play.server import web_assets_missing
     missing = web_assets_missing()
@@ -52,7 +63,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     print(f"igraph-fight play: loading {graph}", file=sys.stderr, flush=True)
     try:
         server = PlayServer(graph, style=args.style, depth=args.depth, seconds=args.seconds,
-                            player_style=args.player_style, idle=args.idle, save_dir=args.save_dir)
+                            player_style=args.player_style, idle=args.idle, save_dir=args.save_dir, physics=physics)
     except ValueError as e:  # a style that does not load, a graph file refused
         print(f"igraph-fight: error: {e}", file=sys.stderr)
         return 2

@@ -69,7 +69,10 @@ class PlayServer:
 
     def __init__(self, graph, *, style: str = "balanced", depth: int = 3, seconds: float = 60.0,
                  player_style: str = "balanced", idle: str = "guard", save_dir: str | Path | None = "out/play",
-                 web_dir: Path = WEB_DIR) -> None:
+                 web_dir: Path = WEB_DIR, physics=None) -> None:
+        """``physics``: None for kinematic games, else the tracker package's physics play (an object
+        whose ``session(npc, rater, config, graph_hash, npc_style)`` makes a game session and whose
+        ``label`` names the physics), or a callable ``(library, sim_params) -> that object``."""
         from igraph_fight.controller import NPCController
         from igraph_fight.game import FightGame, GameConfig
         from igraph_fight.graph import InteractionGraph, load_graph
@@ -102,6 +105,7 @@ class PlayServer:
         self._http_buckets: OrderedDict[str, TokenBucket] = OrderedDict()
         from igraph_fight.graph import library_fingerprint
         self.library_fp = library_fingerprint(self.library)
+        self.physics = physics(self.library, graph.sim_params()) if callable(physics) else physics
         self.warm_up()
 
     def warm_up(self) -> None:
@@ -349,7 +353,10 @@ class GameChannel:
         rater, _ = await srv.pool.get(d["player_style"], RATER_DEPTH)
         cfg = PlayConfig(seconds=d["seconds"], style=d["style"], depth=d["depth"], player_style=d["player_style"],
                          idle=d["idle"])
-        self.session = GameSession(srv.game, npc, rater, cfg, srv.graph.content_hash, npc_style=d["style"])
+        if srv.physics is not None:
+            self.session = srv.physics.session(npc, rater, cfg, srv.graph.content_hash, npc_style=d["style"])
+        else:
+            self.session = GameSession(srv.game, npc, rater, cfg, srv.graph.content_hash, npc_style=d["style"])
         from planner import list_presets
         await self.send({"v": PROTOCOL_VERSION, "type": "hello", "drawing": self.session.drawing,
                          "commands": fallback_table(), "styles": list_presets(), "depth_range": list(GAME_DEPTH_RANGE),
@@ -405,7 +412,8 @@ class GameChannel:
                 await self.send(msg)
             if self.session.over:
                 self.mode = "over"
-                if self.server.save_dir is not None and self.session.player.done and self.session.saved_as is None:
+                if self.server.save_dir is not None and self.session.player.done and self.session.saved_as is None \
+                        and getattr(self.session, "saveable", True):
                     await self.save()
                 await self.send(self.session.status("over"))
         elif self.mode == "replay" and self.replay is not None:
@@ -428,6 +436,9 @@ class GameChannel:
             return
         try:
             name, folder = save_bout(self.session, self.server.save_dir)
+        except ValueError as e:       # a session that is not saved (physics)
+            await self.send(self.server.error(ProtocolError("bad_request", str(e))))
+            return
         except OSError as e:
             await self.send(self.server.error(ProtocolError("bad_request", f"could not save: {e}")))
             return

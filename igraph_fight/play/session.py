@@ -259,6 +259,12 @@ class GameSession:
                 return int(d.action), {"off_graph": bool(d.off_graph)}
             except ValueError as e:  # the controller refused the state: play the first legal action
                 return int(state.legal_actions(1)[0]), {"error": str(e)[:200]}
+        return self.player_action(observe(state, 0), state.legal_actions(0))
+
+    def player_action(self, obs, legal) -> tuple[int, dict]:
+        """Fighter A's action at a decision: the queued command (else the held key, else the idle
+        command) resolved over A's menu rated by the player's style (``obs``: A's Observation;
+        ``legal``: A's legal actions, used unrated when the rater refuses the state)."""
         now = time.monotonic()
         if self.queued is not None:
             cmd, source, latency = self.queued, "key", (now - self.queued_at) * 1e3
@@ -268,9 +274,9 @@ class GameSession:
         else:
             cmd, source, latency = (None if self.config.idle == "best" else "guard"), "idle", None
         try:
-            acts, scores = rate_menu(self.rater, observe(state, 0))
+            acts, scores = rate_menu(self.rater, obs)
         except ValueError:  # the controller refused the state: the category rule on an unrated menu
-            acts = np.asarray(state.legal_actions(0), dtype=np.int64)
+            acts = np.asarray(legal, dtype=np.int64)
             scores = np.zeros(len(acts))
         if cmd is None:
             j = int(np.argmax(scores))

@@ -25,7 +25,9 @@ from igraph_fight.cli import (check_swap, depth, non_negative_int, positive_floa
 FIRST_PLY_HELP = "table (default), exact or exact2"
 FUTURE_HELP = "calibrated (default), physical, kinematic or none"
 
-TRACKER_HELP = "tracking controller: a policy checkpoint or 'pd'; default: the shipped policy"
+TRACKER_HELP = ("tracking controller: assisted[:CKPT] (the default: the shipped learned tracker, assisted physics "
+                "with its bounded wrench reported), assisted-off[:CKPT] (the same policy, plain physics), "
+                "pd-fixed[=CAP], pd-batch, legacy[:CKPT] or pd")
 FIGHTER_HELP = ("style, STYLE+phys[:MODEL] (physically measured hit odds, tracker.bouts.hit_model), "
                 "STYLE+close[=R,THETA][:avoid=A,B,...] (closes in by a geometric rule until engaged within R m "
                 "and THETA rad, never launching the avoided library actions: igraph_fight.closing), both, or "
@@ -34,6 +36,13 @@ FACING_HELP = ("which way a fallen fighter faces when it gets up: towards the op
                "fighting direction when the fall was detected")
 RESET_HELP = ("where a fallen fighter gets up: on its reference pelvis (default; the topple undone) or where "
               "its pelvis was when the fall was detected")
+
+
+def format_assist(who: str, a: dict) -> str:
+    """One fighter's assist figures (tracker.track.assist.summarise_assist) as a line."""
+    return (f"assist {who} (cap {a['cap_mg']:g} mg): |F| mean {a['force_mean_mg']:.3f} mg (p95 {a['force_p95_mg']:.3f}), "
+            f"|tau| mean {a['torque_mean_mgm']:.3f} mg m (p95 {a['torque_p95_mgm']:.3f}), "
+            f"{100 * a['at_cap_share']:.1f}% of steps at the cap, impulse {a['impulse_n_s_per_s']:.0f} N s per s")
 
 
 def format_summary(s: dict) -> str:
@@ -51,6 +60,13 @@ def format_summary(s: dict) -> str:
         f"  real-time factor {s['realtime_factor']:.2f}x (rendering excluded; load {s.get('machine_load')}); "
         f"tracker: {s['tracker']}",
     ]
+    if s.get("physics_label"):
+        lines.append(f"  {s['physics_label']}")
+    for k in ("a", "b"):
+        if f"assist_{k}" in s:
+            lines.append("  " + format_assist(k.upper(), s[f"assist_{k}"]))
+    if "hits_at_cap" in s:
+        lines.append(f"  hits landed while the hitter's assist was at its cap: {s['hits_at_cap']}")
     if s.get("root_assist"):
         lines.append("  ROOT ASSIST ON: pelvises held on the references by welds; not physics, falls impossible")
     for k, v in s["artifacts"].items():

@@ -13,18 +13,34 @@ from tracker.bouts.agents import ClosingAgent
 
 def load_tracker(spec=None):
     """The tracking controller of a physics bout:
-    - ``"assisted"`` or ``"assisted:CKPT"``: the learned assisted tracker (assisted physics: its
-      own bounded wrench; tracker.track.assisted_policy), ``"assisted-off[:CKPT]"`` the same policy
-      with its assist off (physics);
+    - None (the default): the shipped learned assisted tracker
+      (tracker/checkpoints/assisted_cmu13.pt; assisted physics, its bounded wrench reported), else,
+      when that file is missing, the legacy policy, else PD (a warning on stderr);
+    - ``"assisted"`` or ``"assisted:CKPT"``: the learned assisted tracker (tracker.track.assisted_policy),
+      ``"assisted-off[:CKPT]"`` the same policy with its assist off (plain physics);
     - ``"pd-batch"``: PD tracking on the batched env, no assist; ``"pd-fixed"`` or
       ``"pd-fixed=CAP"``: PD with the fixed assist (cap in body weights, default 0.5);
-    - ``"pd"``, a legacy policy checkpoint path, None for the shipped legacy policy
-      (tracker/checkpoints/boxing_cmu13.pt; PD with a warning on stderr when it is missing);
+    - ``"legacy"`` or ``"legacy:CKPT"``: the unassisted per-fighter policy
+      (tracker/checkpoints/boxing_cmu13.pt); ``"pd"``: plain PD on the per-fighter env; any other
+      string: a legacy policy checkpoint path;
     - a tracker object (``reset(env)``, ``act(env, obs)``), returned as it is.
     The environment variable IGRAPH_FIGHT_TRACKER gives the default spec."""
     if spec is not None and not isinstance(spec, (str, os.PathLike)):
         return spec
     spec = spec or os.environ.get("IGRAPH_FIGHT_TRACKER") or None
+    if spec is None:
+        from tracker.track.assisted_policy import DEFAULT_ASSISTED_CKPT
+        if DEFAULT_ASSISTED_CKPT.is_file():
+            spec = "assisted"
+        else:
+            print(f"tracker.bouts: no assisted tracker at {DEFAULT_ASSISTED_CKPT}; using the legacy policy "
+                  "(train one: igraph-fight tracker train-assisted)", file=sys.stderr)
+    if isinstance(spec, str) and (spec == "legacy" or spec.startswith("legacy:")):
+        spec = spec[7:] or None
+        if spec is None:
+            from tracker.track.policy_net import DEFAULT_CKPT
+            if not DEFAULT_CKPT.is_file():
+                raise ValueError(f"tracker 'legacy': no legacy policy at {DEFAULT_CKPT}")
     if isinstance(spec, str) and spec.split(":")[0] in ("assisted", "assisted-off"):
         from tracker.track.assisted_policy import load_assisted
         kind, _, path = spec.partition(":")

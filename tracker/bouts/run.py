@@ -55,7 +55,7 @@ def run_physics_fight(graph, style_a: str = "infighter", style_b: str = "outboxe
 
         bout.schedule.append((float(t_sw), do_swap, f"A switches to {st}"))
     res = bout.run(seed=seed, progress=progress, max_wall_s=max_wall_s)
-    title = f"{style_a} vs {style_b}" + (" [root assist: not physics]" if root_assist else "")
+    title = f"{style_a} vs {style_b}" + (" [root assist: not physics]" if root_assist else f" [{res.physics}]")
     summary = write_physics_artifacts(bout, res, out, title=title, video=video, video_fps=video_fps, width=width,
                                       height=height)
     summary["root_assist"] = bool(root_assist)
@@ -123,4 +123,22 @@ def run_series(graph, style_a: str = "infighter", style_b: str = "outboxer", n_b
             "unplanned_hits": tot("unplanned_hits"),
             "planned_closest_m_median": _median([g for r in rows for g in r["planned_closest_m"] if g is not None]),
             "mean_distance_m": tot("mean_distance_m") / max(n_bouts, 1),
-            "realtime_factor_mean": tot("realtime_factor") / max(n_bouts, 1), "bouts": rows}
+            "realtime_factor_mean": tot("realtime_factor") / max(n_bouts, 1),
+            "physics_label": rows[0].get("physics_label") if rows else None,
+            **({"assist_a": _pooled_assist([r["assist_a"] for r in rows]),
+                "assist_b": _pooled_assist([r["assist_b"] for r in rows]), "hits_at_cap": int(tot("hits_at_cap"))}
+               if rows and "assist_a" in rows[0] else {}),
+            "bouts": rows}
+
+
+def _pooled_assist(per_bout: list[dict]) -> dict:
+    """Per-fighter assist figures over several bouts: means weighted by control steps, the p95s as the
+    largest bout p95 (an upper bound: the per-step values are not kept), the cap as reported."""
+    steps = np.array([d["steps"] for d in per_bout], float)
+    w = steps / steps.sum() if steps.sum() > 0 else np.full(len(steps), 1.0 / max(len(steps), 1))
+    mean = lambda k: float(np.dot(w, [d[k] for d in per_bout]))  # noqa: E731
+    return {"cap_mg": per_bout[0]["cap_mg"], "steps": int(steps.sum()),
+            "force_mean_mg": mean("force_mean_mg"), "force_p95_mg": max(d["force_p95_mg"] for d in per_bout),
+            "torque_mean_mgm": mean("torque_mean_mgm"), "torque_p95_mgm": max(d["torque_p95_mgm"] for d in per_bout),
+            "at_cap_share": mean("at_cap_share"), "impulse_n_s_per_s": mean("impulse_n_s_per_s"),
+            "angular_impulse_nm_s_per_s": mean("angular_impulse_nm_s_per_s")}

@@ -190,9 +190,12 @@ class Rollouts:
 
 
 def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConfig(), library: str | None = None,
-          resume: str | None = None, progress: bool = True, log=print, max_iterations: int | None = None) -> dict:
+          resume: str | None = None, progress: bool = True, log=print, max_iterations: int | None = None,
+          overrides: dict | None = None) -> dict:
     """Train for ``minutes`` of wall clock (or ``max_iterations``); write ``out`` (and ``out``.png).
-    ``resume``: continue a checkpoint (weights, optimiser, normaliser, curriculum, budget)."""
+    ``resume``: continue a checkpoint (weights, optimiser, normaliser, curriculum, budget) under its
+    stored config, except the fields in ``overrides`` (the command line's ``--set``); a
+    ``cap_start`` among them restarts the cap curriculum at that cap."""
     import torch
 
     from igraph_fight.checkpoint import save_checkpoint
@@ -202,7 +205,7 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     if resume:
         from igraph_fight.checkpoint import load_checkpoint
         prior = load_checkpoint(resume, FORMAT, (VERSION,), "assisted-tracker checkpoint")
-        cfg = AssistedTrainConfig.from_dict({**asdict(cfg), **prior["config"]})
+        cfg = AssistedTrainConfig.from_dict({**asdict(cfg), **prior["config"], **(overrides or {})})
     torch.manual_seed(cfg.seed + (prior["budget"]["runs"] if prior else 0))
     if library:
         from motion_graph.library import load_library
@@ -228,7 +231,7 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
         budget = dict(prior["budget"])
         curve = list(prior["curve"])
         completions = list(prior.get("completions", []))
-        roll.set_cap(float(prior["cap"]))
+        roll.set_cap(cfg.cap_start if "cap_start" in (overrides or {}) else float(prior["cap"]))
     budget["runs"] += 1
     cpu0, wall0 = time.process_time(), time.perf_counter()
     cpu_base, wall_base = budget["cpu_s"], budget["wall_s"]

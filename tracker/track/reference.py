@@ -264,7 +264,8 @@ def _grounded_reference(motion: Motion, scene: FighterScene, fm: BodyMap, qpos: 
     ctrl, ctrl_vel = ctrl_targets(qpos, qvel, fm)
     pen = FootPenetration.from_depths(-low, float(np.mean(off)) if len(off) else 0.0)
     meta = dict(penetration_before_lift=FootPenetration.from_depths(np.maximum(-feet0.min(axis=1), 0.0)).as_dict(),
-                floor_before=floor_report(feet0), floor_after=floor_report(feet1), ground_offset_m=off)
+                floor_before=floor_report(feet0), floor_after=floor_report(feet1), ground_offset_m=off,
+                feet_after_m=feet1)
     return Reference(motion.fps, qpos, qvel, ctrl, ctrl_vel, sites, pen, motion.source, meta)
 
 

@@ -207,6 +207,11 @@ function onFrame(m) {
   $('label-a').textContent = m.labels[0].replace('_', ' ');
   $('label-b').textContent = m.labels[1].replace('_', ' ');
   $('time-left').textContent = m.time_left.toFixed(1);
+  if (m.assist_mg && S.status.physics) {
+    const down = m.down || [false, false];
+    $('physics').textContent = `${S.status.physics} \u00b7 assist now A ${m.assist_mg[0].toFixed(2)} mg, B ${m.assist_mg[1].toFixed(2)} mg`
+      + (down[0] || down[1] ? ` \u00b7 down: ${down[0] ? 'A' : ''}${down[1] ? 'B' : ''}` : '');
+  }
 }
 
 function onDecision(m) {
@@ -224,6 +229,7 @@ function onStatus(m) {
   S.status = m;
   $('style-b').textContent = m.style;
   $('depth-b').textContent = m.depth;
+  if (m.physics) { $('physics').textContent = m.physics; $('physics').hidden = false; }
   if (m.mode !== 'replay') { $('depth').value = m.depth; $('depth-value').textContent = m.depth; }
   $('mode').textContent = { live: 'live bout', over: 'bout over', replay: `replay of ${m.bout}`, paused: 'paused' }[m.mode] || m.mode;
   const banner = $('banner');

@@ -72,7 +72,8 @@ def _plot_physics(res: PhysicsBoutResult, path: Path, title: str) -> None:
     tr = res.trace
     fig, ax0, ax1 = distance_and_hits_figure(
         tr["t"], tr["distance"], "pelvis distance (m)",
-        f"{title} (physics): {res.names[0]} (A) vs {res.names[1]} (B), score {res.score:+.0f}", height=6.5)
+        f"{title if res.physics in title else f'{title} ({res.physics})'}: {res.names[0]} (A) vs {res.names[1]} (B), "
+        f"score {res.score:+.0f}", height=6.5)
     cols = ("#e4572e", "#3fa7d6")
     for who in (0, 1):
         ts = [h["t"] for h in res.hit_events if h["attacker"] == who]
@@ -156,6 +157,7 @@ def render_bout_video(bout: PhysicsBout, res: PhysicsBoutResult, path: str | os.
             flash = [k for k in (0, 1) if any(t - 0.3 < x <= t + 1e-9 for x in hits_t[k])]
             if flash:
                 sub += "   " + " ".join(f"HIT by {'AB'[k]}" for k in flash)
+            sub += f"   [{res.physics}]"
             img = _label_bottom(img, sub)
             writer.send(np.ascontiguousarray(img[:h2, :w2]))
     finally:

@@ -18,14 +18,14 @@ Approximations, named: (1) the rollouts leave the opponent out (a one-fighter sc
 clinches and pushes are not foreseen; they are rare next to falls, which is what the search
 prevents); (2) the look-ahead past a fighter's planned action reads the reference's placeholder
 (the action's last frame held still, tracker.bouts.physics_bout) since the next action is not chosen yet, or,
-with ``foresee`` (nineteenth session), the actions its agent would choose from the coupled state
+with ``foresee``, the actions its agent would choose from the coupled state
 predicted at each action's end (PhysicsBout._foresee: a guess, one frame late, rewritten by the
 real decision; measured in bouts: right one time in three, and more falls, research/notes/BOUTS.md); (3)
 MuJoCo's warm start and the contacts of the first substep are recomputed in the copy (mj_forward),
 so a rollout of the unchanged policy differs from the bout's own continuation in the last digits
 of the solver. No force acts on any root; the search only chooses PD targets.
 
-Two options (sixteenth session, research/notes/BOUTS.md): ``duel`` rolls the candidates out in a copy of
+Two options (research/notes/BOUTS.md): ``duel`` rolls the candidates out in a copy of
 the whole bout (both bodies simulated, the opponent on its plain policy: it does not search in
 there), so a rollout sees the opponent's arms in the way of a punch, clinches and pushes, at about
 twice the cost; ``aim`` adds a reward for the fighter's planned hits (PhysicsBout.planned_windows):
@@ -33,11 +33,11 @@ inside each strike window, how near the strike's fist comes to the opponent's he
 (the opponent's geoms as simulated in duel rollouts, else where they are now moved on by its
 reference). Planned hits missed mostly because the fist met the opponent's guard, which the
 kinematic simulator does not model (its targets are spheres, a guard action no defence).
-``touch`` (seventeenth session) adds a reward for each rollout step that ends with the strike's
+``touch`` adds a reward for each rollout step that ends with the strike's
 fist on a target: the aim term alone scores a fist stopped by a forearm 2 cm short of the head
-at 98% of a hit. ``lead`` (eighteenth session) rewards the striker's pelvis on its reference from 0.5 s
+at 98% of a hit. ``lead`` rewards the striker's pelvis on its reference from 0.5 s
 before each planned window to its end (measured: three times the falls, no larger landed share).
-``upfirst`` (twenty-second session, SearchSettings.up_first) ranks the candidates by how long their
+``upfirst`` (SearchSettings.up_first) ranks the candidates by how long their
 rollouts stay up before their returns: with the heading, aim and touch terms a candidate that falls
 late in the look-ahead otherwise wins over one that stays up whenever it pays more early on (in 20 s
 of two bouts under ``search:early:yawtol=0.35:aim=3:touch=10:spread=3:duel``, 7-14 of a fighter's
@@ -49,8 +49,8 @@ Defaults (BOUT_SEARCH): 16 candidates, 1.5 s look-ahead, every candidate tried, 
 reward (SearchSettings.heading_weight). Cost: candidates x (segment + lookahead) / segment = 256
 one-fighter control steps per control step and fighter: 0.074x real time for the two fighters on
 one core of the development VM; early acceptance (":early", the plain policy played when its own
-rollout stays up) 0.27x without the heading reward (research/notes/BOUTS.md, fifteenth session);
-``search:early:yawtol=0.35:aim=3:touch=10:spread=3:duel`` 0.06-0.08x (eighteenth session).
+rollout stays up) 0.27x without the heading reward (research/notes/BOUTS.md);
+``search:early:yawtol=0.35:aim=3:touch=10:spread=3:duel`` 0.06-0.08x.
 """
 from __future__ import annotations
 
@@ -63,13 +63,13 @@ from tracker.bouts.judging import fist_gap, target_geometry
 from tracker.body.humanoid import EFFECTOR_LABELS, TARGET_LABELS
 from research.search_controller import SearchController, SearchSettings
 
-# The bout default (fifteenth session, research/notes/BOUTS.md): the walks' strong search (16 candidates,
+# The bout default (research/notes/BOUTS.md): the walks' strong search (16 candidates,
 # 1.5 s look-ahead, every candidate tried) with a heading reward that keeps a fighter facing where
 # its reference faces (without it the fighters drift apart facing away). Early acceptance
 # (":early") is cheaper; with the heading reward, a yaw tolerance and the touch reward it was
-# measured in the eighteenth session (research/notes/BOUTS.md: no worse, 1.5-2.3x cheaper).
+# measured (research/notes/BOUTS.md: no worse, 1.5-2.3x cheaper).
 BOUT_SEARCH = SearchSettings(candidates=16, lookahead=45, heading_weight=1.0)
-# The pelvis lead term (``lead``, eighteenth session): from LEAD_IN_STEPS control steps before a planned
+# The pelvis lead term (``lead``): from LEAD_IN_STEPS control steps before a planned
 # strike's window to its end, lead * exp(-(d / LEAD_SIGMA_M)^2) per rollout step, d the striker's
 # pelvis distance from its reference's (ground plane): planned punches in bouts missed mostly out of
 # reach, the striker's pelvis 10-22 cm behind its reference (the miss anatomy of tracker.bouts.physics_bout).

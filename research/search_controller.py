@@ -54,10 +54,10 @@ class SearchSettings:
     #                               search, extended by one segment instead of simulated again (exact
     #                               where the env is the one played: the plain policy is deterministic);
     #                               with first_kept too, the chosen offset's rollout likewise
-    # Heading (physics bouts, where a fighter's facing steers the planner; fifteenth session):
+    # Heading (physics bouts, where a fighter's facing steers the planner):
     heading_weight: float = 0.0   # extra reward heading_weight * exp(-10 (1 - cos(yaw error))) per step
     yaw_tol: float = float("inf")  # early_accept also needs the pelvis yaw within this (rad) of the reference's
-    # Ranking (twenty-second session): by default the best discounted return wins, so a rollout that
+    # Ranking: by default the best discounted return wins, so a rollout that
     # falls late in the look-ahead (its return only truncated) can beat one that stays up when an extra
     # term (heading, aim) pays more early on; up_first ranks by steps stayed up (a rollout that stays up
     # over the whole look-ahead first), then by return

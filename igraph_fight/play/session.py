@@ -180,16 +180,22 @@ class Streamer:
             out.append(self.frame_message(frames[-1], hits))
         return out
 
+    def frame_view(self, fr: Frame) -> tuple[np.ndarray, list[str], float, dict]:
+        """What a frame shows: the drawn joints' positions (2, J, 3), both action labels, the
+        distance (m) and extra message fields."""
+        p = self.player
+        w = fr.world
+        return (world_positions(p.lib, fr.world, self.joints), [p.lib.labels[int(a)] for a in w.action],
+                float(np.hypot(w.x[1] - w.x[0], w.z[1] - w.z[0])), {})
+
     def frame_message(self, fr: Frame, hits: list[dict]) -> dict:
         p = self.player
-        pos = world_positions(p.lib, fr.world, self.joints)
-        w = fr.world
-        labels = [p.lib.labels[int(a)] for a in w.action]
+        pos, labels, distance, extra = self.frame_view(fr)
         msg = {"type": "frame", "i": fr.i, "t": round(fr.i / p.fps, 4),
                "pose": [np.round(pos[k], 3).ravel().tolist() for k in (0, 1)],
                "hits": [int(x) for x in p.hits], "score": int(p.hits[0] - p.hits[1]),
-               "distance": round(float(np.hypot(w.x[1] - w.x[0], w.z[1] - w.z[0])), 3), "labels": labels,
-               "time_left": round(max(p.end_frame - fr.i, 0) / p.fps, 2)}
+               "distance": round(distance, 3), "labels": labels,
+               "time_left": round(max(p.end_frame - fr.i, 0) / p.fps, 2), **extra}
         if hits:
             msg["hit_events"] = [{"attacker": h["attacker"], "victim": h["victim"], "kind": h["kind"]} for h in hits]
         return msg
@@ -238,6 +244,16 @@ class GameSession:
         if seconds is not None:
             self.config.seconds = float(seconds)
         self.seed = int(seed) if seed is not None else int.from_bytes(os.urandom(4), "little")
+        self.start_bout()
+        self.queued, self.held = None, []
+        self.notes = []
+        self.styles_used = [self.npc_style]
+        self.depths_used = [self.npc_depth]
+        self.created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        self.saved_as: str | None = None
+
+    def start_bout(self) -> None:
+        """The bout of ``self.seed``: its player (``self.player``), streamer and start record."""
         game = FightGame(self.lib, GameConfig(max_seconds=self.config.seconds, sim=self.game.config.sim),
                          tables=self.game.tables)
         self.bout_game = game
@@ -245,12 +261,6 @@ class GameSession:
         self.start = start_of(state)
         self.player = BoutPlayer(state, self.config.seconds, self._decide)
         self.streamer = Streamer(self.player, self.drawing["joints"])
-        self.queued, self.held = None, []
-        self.notes = []
-        self.styles_used = [self.npc_style]
-        self.depths_used = [self.npc_depth]
-        self.created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        self.saved_as: str | None = None
 
     def _decide(self, state: FightState, p: int) -> tuple[int, dict]:
         if p == 1:

@@ -1,6 +1,6 @@
 """Where standing fighters go in a physics bout: per action the reference's and the body's pelvis
 ground displacement (towards the opponent) and yaw change, and the facing angle and off-graph share
-of the decisions (research/notes/BOUTS.md, fifteenth session). Hit-odds fighters (infighter+phys against
+of the decisions (research/notes/BOUTS.md). Hit-odds fighters (infighter+phys against
 outboxer+phys), one bout:
 
     python -m research.probes.bout_facing_probe --graph G.igz --tracker search --seconds 20 --seed 1

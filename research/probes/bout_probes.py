@@ -1,4 +1,4 @@
-"""Probes of physics bouts (issue 8, eleventh session): strike aiming (not adopted), why planned
+"""Probes of physics bouts (issue 8): strike aiming (not adopted), why planned
 hits miss, and the fall rule.
 
     python -m research.probes.bout_probes series [--bouts 30] [--seconds 60]   # planned hits realised, aim off / on
@@ -7,7 +7,7 @@ hits miss, and the fall rule.
 
 Infighter vs outboxer (IG, depth 5), the shipped tracker, the default graph build (``--graph``,
 default /tmp/g1k.igz: ``igraph-fight build --mocap ../shared/mocap/cmu/boxing --out /tmp/g1k.igz``),
-seeds 1..N. Results: research/notes/BOUTS.md ("Eleventh session").
+seeds 1..N. Results: research/notes/BOUTS.md.
 
 Strike aiming: the punching arm's PD targets bent so that the fist meets the opponent's body
 where it physically is (the planned hits are predicted from the kinematic coupled state, the

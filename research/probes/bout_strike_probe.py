@@ -1,5 +1,5 @@
 """Planned punches, one at a time: how often a strike the kinematic simulator plans lands as a
-physical hit, and how near its fist comes when it does not (research/notes/BOUTS.md, sixteenth session).
+physical hit, and how near its fist comes when it does not (research/notes/BOUTS.md).
 
 Each trial is a short physics bout from a drawn start: fighter A, in guard, throws one punch of the
 library (the strike actions in turn) at B standing in guard, from a distance (0.5-1.3 m) and a

@@ -2,7 +2,7 @@
 decisions facing more than 1 rad away from the opponent and the mean distance, for the policy-table
 fighters with and without the rule on A (the same seeds, so the difference is paired); and how
 long the rule takes to engage a fighter from 3 m facing away, the opponent standing still
-(research/notes/BOUTS.md, twentieth session).
+(research/notes/BOUTS.md).
 
     python -m research.probes.closing_kinematic --graph G.igz --a infighter --b outboxer --bouts 40 [--both] [--avoid 7,60]
 

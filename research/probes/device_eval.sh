@@ -1,6 +1,6 @@
 #!/bin/bash
 # A large evaluation of the shipped planner fighters (STYLE+phys) against the physics RL baseline on
-# a machine with many cores (thirteenth session: a lent GPU machine's 16 CPU cores, 384 bouts in
+# a machine with many cores (on a lent GPU machine's 16 CPU cores, 384 bouts in
 # 382 s; tracker/BOUTS.md, last section). Run from the repository root; the machine needs Python
 # with numpy, numba, scipy, torch, tqdm and matplotlib; mujoco can travel as wheels in .whl/
 # (INSTALL=1 installs them: `pip download --no-deps --only-binary=:all: --python-version 3.12

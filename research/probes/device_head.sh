@@ -1,6 +1,6 @@
 #!/bin/bash
 # Rounds of the balance head's search + fit (tracker/layer_head.py) on a machine with many cores
-# (fourteenth session: a lent GPU machine's 16 CPU cores; its GPU unused). Run from the repository
+# (on a lent GPU machine's 16 CPU cores; its GPU unused). Run from the repository
 # root; the machine needs Python with numpy, scipy, torch and tqdm; mujoco travels as wheels in
 # .whl/ (see benchmarks/device_eval.sh), the CMU takes in .devdata/boxing. Env: OUT (results),
 # ROUNDS, MINUTES (collection wall minutes per round), WORKERS, RESUME (a head checkpoint to go on

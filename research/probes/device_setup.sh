@@ -17,6 +17,6 @@ if [ -z "$GRAPH" ]; then
 fi
 $PY -c "import sys; from igraph_fight.graph import load_graph; print('graph content hash', load_graph(sys.argv[1]).content_hash[:12])" "$GRAPH" 2>&1 | tail -1
 # one thread per bout process (16 processes ran about 2.5x slower per process than one process on the
-# development VM in the thirteenth and fifteenth sessions; with one thread each still about 2x in the
-# eighteenth, so the pools were not the cause: tracker/BOUTS.md, eighteenth session)
+# development VM; with one thread each still about 2x,
+# later, so the pools were not the cause: research/notes/BOUTS.md)
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1

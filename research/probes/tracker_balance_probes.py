@@ -1,4 +1,4 @@
-"""Probes of balance levers around the virtual-force layer (issue 7, tenth session); none adopted.
+"""Probes of balance levers around the virtual-force layer (issue 7); none adopted.
 
     python -m research.probes.tracker_balance_probes gravcomp [--walks N] [--forces vertical|free]
     python -m research.probes.tracker_balance_probes split    [--walks N]
@@ -7,7 +7,7 @@
 
 Random 20-action library walks of seed 100 (the tuning seed), no force on the root; controllers:
 PD, PD + the balance layer (tracker/track/vforce.py, default gains), the shipped policy (over the layer).
-Results: research/notes/TRAINING.md ("Tenth session").
+Results: research/notes/TRAINING.md.
 
 - gravcomp: a gravity feed-forward (static inverse dynamics) on every actuator: the joint torques
   that would hold the current pose still with the stance feet carrying the body,

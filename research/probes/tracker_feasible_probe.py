@@ -1,4 +1,4 @@
-"""Is a physically feasible reference easy to track? (issue 7 probe, fourteenth session)
+"""Is a physically feasible reference easy to track? (issue 7 probe)
 
 1. Run the strong search teacher (the shipped policy over its balance layer, 16 candidate offsets
    per 0.1 s, each scored over a 1.5 s lookahead: run M's teacher, whose own episodes go 10 s and

@@ -1,4 +1,4 @@
-"""Probes of static support and of a grounded reference (issue 7, thirteenth session); not adopted.
+"""Probes of static support and of a grounded reference (issue 7); not adopted.
 
     python -m research.probes.tracker_ground_probes statue [--frames 0,30,60,90,120]
     python -m research.probes.tracker_ground_probes ground [--walks N] [--controllers pd,layer,policy] [--no-com]
@@ -10,7 +10,7 @@
 
 Walks: random 20-action library walks of seed 100 (the tuning seed); no force on the root.
 Controllers: PD, PD + the balance layer (tracker/track/vforce.py, default gains), the shipped policy
-(over the layer). Results: research/notes/TRAINING.md ("Thirteenth session").
+(over the layer). Results: research/notes/TRAINING.md.
 
 - statue: frames of the first seed-100 walk, each held still for 10 s (the time tracked before the
   fall, 9.97 s = stood). ``raw``: the mocap frame as it is (grounded so its lowest foot point is

@@ -1,4 +1,4 @@
-"""Are the search's labels a function of the state, or of chaos? (issue 7, eighth session)
+"""Are the search's labels a function of the state, or of chaos? (issue 7)
 
     python -m research.probes.tracker_label_probe [--ckpt CKPT] [--states 40] [--candidates 16] [--noise 0.02] [--seed 0]
 

@@ -1,9 +1,9 @@
 """Can a search over six balance numbers keep the body up as a search over 66 joint offsets does?
-(issue 7 probe, fourteenth session)
+(issue 7 probe)
 
 The strong search teacher (16 candidates per 0.1 s, 1.5 s lookahead, around the shipped policy over
 its balance layer) keeps the body up for 10 s and more, but its 66-dimensional labels are too
-noisy for a student to learn (research/notes/TRAINING.md, eighth session). If the same search over a few
+noisy for a student to learn (research/notes/TRAINING.md). If the same search over a few
 numbers that steer the balance layer (its centre-of-mass offset and velocity targets and the
 pelvis orientation target, benchmarks/tracker_feasible_probe.layer_bias) kept the body up as long,
 the feedback to learn would be six-dimensional. Per walk: seconds until the search's own

@@ -1,4 +1,4 @@
-"""More probes of why tracking falls (issue 7, seventh session); none found a lever.
+"""More probes of why tracking falls (issue 7); none found a lever.
 
     python -m research.probes.tracker_probes_more contacts [--walks N]   # floor-contact stiffness vs time to fall
     python -m research.probes.tracker_probes_more pin      [--walks N]   # reference with the stance foot's sliding removed

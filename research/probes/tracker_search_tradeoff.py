@@ -2,7 +2,7 @@
 
 The protocol's first N walks (seed 0, 20 actions) under a search with the given candidates and
 lookahead; prints one JSON line: completion, mean time to fall, MPJPE and the real-time factor
-(one process). Fourteenth session, research/notes/TRAINING.md:
+(one process). research/notes/TRAINING.md:
 
     python -m research.probes.tracker_search_tradeoff --candidates 8 --lookahead 24 --walks 10 [--early-accept [--incremental]] [--first-kept] [--reuse]
     python -m research.probes.tracker_search_tradeoff --first 40 --walks 30 --workers 2 --json-out F.json

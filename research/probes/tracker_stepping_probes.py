@@ -1,4 +1,4 @@
-"""Probes of balance by changing the motion or the whole-body control (issue 7, eleventh session);
+"""Probes of balance by changing the motion or the whole-body control (issue 7);
 none adopted.
 
     python -m research.probes.tracker_stepping_probes step [--walks N]   # capture-point stepping over the layer

@@ -1,4 +1,4 @@
-"""Does time-varying linear feedback hold a feasible trajectory? (issue 7 probe, fourteenth session)
+"""Does time-varying linear feedback hold a feasible trajectory? (issue 7 probe)
 
 research/probes/tracker_feasible_probe.py showed that a trajectory the simulator itself produced (the
 strong search teacher's, 10 s without a fall) is tracked barely longer than the mocap by PD, the

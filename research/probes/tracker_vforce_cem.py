@@ -4,15 +4,15 @@ Each candidate (com_kp, com_kd, root_kp, root_kd, torque_clip; searched in log s
 the mean time to fall over the same random 20-action walks of the tuning seed (100), no force on
 the root, minus ``slide_penalty`` x (the feet's sliding speed above ``slide_target``): the
 contact-force-weighted horizontal speed of the foot geoms touching the floor (m/s; PD 0.17). Both
-cores evaluate candidates. Ninth session (research/notes/TRAINING.md): the first search, on time to fall
+cores evaluate candidates (research/notes/TRAINING.md). The first search, on time to fall
 only, found gains that balance by skating (0.71 m/s); BalanceGains' defaults come from the second:
 
     python -m research.probes.tracker_vforce_cem --walks 24 --slide-penalty 0 --start 4000,800,1000,100,150 --seed 0
     python -m research.probes.tracker_vforce_cem --walks 12 --slide-penalty 4 --slide-target 0.25 --seed 1   # the defaults
 
 ``--arm-velocity-targets`` searches under PD with the arms damped towards the reference velocity
-(tenth session: gains for that setting; TRAINING.md). ``--policy CKPT`` searches under a learned
-tracker instead of PD (the checkpoint's ``vf_gains`` replaced by each candidate; eleventh session):
+(gains for that setting: TRAINING.md). ``--policy CKPT`` searches under a learned
+tracker instead of PD (the checkpoint's ``vf_gains`` replaced by each candidate):
 
     python -m research.probes.tracker_vforce_cem --policy tracker/checkpoints/boxing_cmu13.pt --walks 12 \
         --slide-penalty 4 --slide-target 0.32 --start 3200,500,280,100,58 --seed 3

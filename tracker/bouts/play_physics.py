@@ -148,20 +148,13 @@ def _site_rows(fm, lib, joints: list[int]) -> np.ndarray:
 class PhysicsStreamer(Streamer):
     """The Streamer of a physics game: frames carry the simulated poses and the fighters' falls."""
 
-    def frame_message(self, fr: PhysicsFrame, hits: list[dict]) -> dict:
+    def frame_view(self, fr: PhysicsFrame) -> tuple[np.ndarray, list[str], float, dict]:
         p = self.player
-        msg = {"type": "frame", "i": fr.i, "t": round(fr.i / p.fps, 4),
-               "pose": [np.round(fr.pose[k], 3).ravel().tolist() for k in (0, 1)],
-               "hits": [int(x) for x in p.hits], "score": int(p.hits[0] - p.hits[1]),
-               "distance": round(p.distance_m(), 3), "labels": p.labels(),
-               "time_left": round(max(p.end_frame - fr.i, 0) / p.fps, 2),
-               "down": [bool(f.down) for f in p.bout.F]}
+        extra = {"down": [bool(f.down) for f in p.bout.F]}
         batch = getattr(p.bout.env, "batch", None)
         if batch is not None:
-            msg["assist_mg"] = [round(float(x), 3) for x in batch.assist_force_mg]
-        if hits:
-            msg["hit_events"] = [{"attacker": h["attacker"], "victim": h["victim"], "kind": h["kind"]} for h in hits]
-        return msg
+            extra["assist_mg"] = [round(float(x), 3) for x in batch.assist_force_mg]
+        return fr.pose, p.labels(), p.distance_m(), extra
 
 
 class PhysicsGameSession(GameSession):
@@ -174,23 +167,13 @@ class PhysicsGameSession(GameSession):
         self.physics = physics
         super().__init__(physics.setup.game, npc, rater, config, graph_hash, npc_style)
 
-    def new_bout(self, seconds: float | None = None, seed: int | None = None) -> None:
-        import os
-        import time
-        if seconds is not None:
-            self.config.seconds = float(seconds)
-        self.seed = int(seed) if seed is not None else int.from_bytes(os.urandom(4), "little") >> 1
+    def start_bout(self) -> None:
+        """The simulated bout of ``self.seed`` (no start record: physics bouts are not replayed)."""
         agents = [HumanAgent(self), NPCAgent(self)]
         self.player = PhysicsPlayer(self.physics.setup, self.physics.tracker, agents, self.config.seconds, self.seed,
                                     self.drawing["joints"])
         self.streamer = PhysicsStreamer(self.player, self.drawing["joints"])
         self.start = {}
-        self.queued, self.held = None, []
-        self.notes = []
-        self.styles_used = [self.npc_style]
-        self.depths_used = [self.npc_depth]
-        self.created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        self.saved_as = None
 
     def status(self, mode: str | None = None) -> dict:
         st = super().status(mode)

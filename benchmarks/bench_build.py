@@ -63,14 +63,19 @@ def _child(cfg: dict) -> dict:  # runs in the child process (see _run)
             **{k: rep[k] for k in keep}}
 
 
-def _run(cfg: dict) -> dict:
-    """One build in a fresh process (this script with --child), so peak memory is its own."""
-    p = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", json.dumps(cfg)], capture_output=True,
+def run_child(script: str, cfg: dict) -> dict:
+    """``python script --child CFG`` in a fresh process (so peak memory is its own); its RESULT line."""
+    p = subprocess.run([sys.executable, os.path.abspath(script), "--child", json.dumps(cfg)], capture_output=True,
                        text=True)
     for line in p.stdout.splitlines():
         if line.startswith("RESULT "):
             return json.loads(line[7:])
     raise RuntimeError(f"benchmark child failed:\n{p.stderr[-3000:]}")
+
+
+def _run(cfg: dict) -> dict:
+    """One build in a fresh process (this script with --child)."""
+    return run_child(__file__, cfg)
 
 
 def _library(root: str, threshold: float, folder: str) -> str:

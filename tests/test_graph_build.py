@@ -373,20 +373,23 @@ def test_cli_build_with_a_guard_records_it_for_every_user_of_the_graph(lib, tmp_
     assert "guard_radius_m" in capsys.readouterr().err
 
 
-def test_spatial_index_agrees_with_brute_force():
+@pytest.mark.parametrize("tr, tt", [(0.1, math.radians(20)), (0.025, math.radians(5))])
+def test_spatial_index_agrees_with_brute_force(tr, tt):
+    """Any grid answers exactly (the sampler's duplicate index is a finer grid than the linking one)."""
     from igraph_fight.build import spatial
 
     rng = np.random.default_rng(0)
-    N, f0, tr, tt = 4000, 3, 0.1, math.radians(20)
+    N, f0 = 4000, 3
+    r1, a = (1.5, np.pi) if tr > 0.05 else (0.6, 0.4)  # the fine grid: points packed closer
     K = np.stack([rng.integers(0, 3, N), rng.integers(0, 3, N), rng.integers(0, 12, N), rng.integers(0, 2, N)], 1)
-    F = np.stack([rng.uniform(0.3, 1.5, N), rng.uniform(-np.pi, np.pi, N), rng.uniform(-np.pi, np.pi, N)], 1)
+    F = np.stack([rng.uniform(0.3, r1, N), rng.uniform(-a, a, N), rng.uniform(-a, a, N)], 1)
     ix = spatial.new_index(N, tr, tt, f0)
     assert spatial.index_insert_many(ix, K, F) == N
     wrap = lambda a: (a + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
     found = 0
     for q in range(300):
         k = np.array([rng.integers(0, 3), rng.integers(0, 3), rng.integers(0, 12), rng.integers(0, 2)])
-        x = np.array([rng.uniform(0.3, 1.5), rng.uniform(-np.pi, np.pi), rng.uniform(-np.pi, np.pi)])
+        x = np.array([rng.uniform(0.3, r1), rng.uniform(-a, a), rng.uniform(-a, a)])
         ok = ((K[:, 0] == k[0]) & (K[:, 1] == k[1]) & (K[:, 3] == k[3]) & (np.abs(K[:, 2] - k[2]) < f0)
               & (np.abs(F[:, 0] - x[0]) <= tr) & (np.abs(wrap(F[:, 1] - x[1])) <= tt)
               & (np.abs(wrap(F[:, 2] - x[2])) <= tt))
@@ -398,7 +401,7 @@ def test_spatial_index_agrees_with_brute_force():
         first = spatial.index_search(ix, k, x[0], x[1], x[2], tr, tt, False, ids[:0], d[:0])
         assert (first >= 0) == ok.any() and (first < 0 or ok[first])
         found += n
-    assert found > 50
+    assert found > 20
 
 
 def test_locate_maps_a_live_state_to_its_graph_state(built, tables):

@@ -233,11 +233,35 @@ def _cluster_groups(X, sf, fo, perm, gstart, tol_r, tol_t, max_iter, local, clpo
         nclust[g] = k
 
 
-def cluster_samples(group_rows: np.ndarray, si: np.ndarray, sf: np.ndarray, options: ClusterOptions) -> Clusters:
+def cluster_groups(X: np.ndarray, sf: np.ndarray, fo: np.ndarray, gstart: np.ndarray, tol_r_m: float,
+                   tol_theta_rad: float, max_iter: int) -> tuple:
+    """Bisecting 2-means inside the groups [gstart[g], gstart[g+1]) of rows 0..n-1 (sorted by
+    group): X (n, 5) the normalised embedding, sf (n, N_SF), fo (n,) F_other. Returns (perm:
+    the rows reordered by cluster inside each group, local: each sorted position's cluster id in
+    its group, clpos: its cluster's first position, cen (n, 4): centroids at clpos, nclust per
+    group). One shard of cluster_samples (a whole run of groups: no cluster spans two groups)."""
+    n = len(X)
+    G = len(gstart) - 1
+    if len(gstart) == 0 or gstart[0] != 0 or gstart[-1] != n or np.any(np.diff(gstart) < 0):
+        raise ValueError(f"gstart must run from 0 to {n} without decreasing")
+    perm = np.arange(n, dtype=np.int64)
+    local = np.empty(n, dtype=np.int64)
+    clpos = np.empty(n, dtype=np.int64)
+    cen = np.zeros((n, 4))
+    nclust = np.zeros(max(G, 0), dtype=np.int64)
+    _cluster_groups(np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(sf, dtype=np.float64),
+                    np.ascontiguousarray(fo, dtype=np.float64), perm, np.ascontiguousarray(gstart, dtype=np.int64),
+                    float(tol_r_m), float(tol_theta_rad), int(max_iter), local, clpos, cen, nclust)
+    return perm, local, clpos, cen, nclust
+
+
+def cluster_samples(group_rows: np.ndarray, si: np.ndarray, sf: np.ndarray, options: ClusterOptions,
+                    backend=None) -> Clusters:
     """Cluster samples inside their groups (group_rows (N, 4) from explore.group_rows).
 
     States are numbered by group (sorted group key), then in the order the bisection finalises
-    them; everything is deterministic and independent of the thread count.
+    them; everything is deterministic and independent of the thread count and of the backend
+    (igraph_fight.build.backend: shards of whole groups; None: one pass in this process).
     """
     N = len(si)
     if N == 0:
@@ -256,12 +280,14 @@ def cluster_samples(group_rows: np.ndarray, si: np.ndarray, sf: np.ndarray, opti
     brk = np.nonzero(np.any(gs[1:] != gs[:-1], axis=1))[0] + 1
     gstart = np.concatenate([[0], brk, [N]]).astype(np.int64)
     perm = order.astype(np.int64).copy()
-    local = np.empty(N, dtype=np.int64)
-    clpos = np.empty(N, dtype=np.int64)
-    cen = np.zeros((N, 4))
-    nclust = np.zeros(len(gstart) - 1, dtype=np.int64)
     fo = si[:, SI_FOTHER].astype(np.float64)
-    _cluster_groups(X, sf, fo, perm, gstart, o.tol_r_m, o.tol_theta_rad, o.max_iter, local, clpos, cen, nclust)
+    if backend is None:
+        p_loc, local, clpos, cen, nclust = cluster_groups(X[perm], sf[perm], fo[perm], gstart, o.tol_r_m,
+                                                          o.tol_theta_rad, o.max_iter)
+        perm = perm[p_loc]
+    else:
+        perm, local, clpos, cen, nclust = backend.cluster_shards(X, sf, fo, perm, gstart, o.tol_r_m, o.tol_theta_rad,
+                                                                 o.max_iter)
     base = np.concatenate([[0], np.cumsum(nclust)[:-1]]).astype(np.int64)
     gid = np.repeat(np.arange(len(nclust)), np.diff(gstart))
     labels = np.empty(N, dtype=np.int64)

@@ -135,49 +135,97 @@ FEATURE_COLUMNS = {"frames": sim.FT_FRAMES, "r": sim.FT_R, "r_mean": sim.FT_R_ME
                    "dmg_received": sim.FT_DMG_RECEIVED, "def_self": sim.FT_DEF_SELF, "def_other": sim.FT_DEF_OTHER}
 
 
+def state_index(nextset: np.ndarray, st_si: np.ndarray, st_sf: np.ndarray, tol_r: float, tol_theta: float, f0: int,
+                s_r: float = 0.5, s_theta: float = np.pi / 6) -> tuple:
+    """The hash index of the states (spatial.new_index), ids = state numbers."""
+    ix = spatial.new_index(len(st_si), tol_r, tol_theta, f0, s_r, s_theta)
+    spatial.index_insert_many(ix, point_rows(nextset, st_si), np.ascontiguousarray(st_sf, dtype=np.float64))
+    return ix
+
+
+def landing_candidates(T: tuple, nextset: np.ndarray, ix: tuple, st_si: np.ndarray, st_sf: np.ndarray,
+                       src: np.ndarray, action: np.ndarray, max_distance_m: float, tol_r: float, tol_theta: float,
+                       max_candidates: int, workers: int | None = 1) -> tuple[np.ndarray, np.ndarray, int]:
+    """Simulate the landings of (state src[k], action[k]) and find each one's up to
+    ``max_candidates`` nearest states within tolerance. Returns (count per landing, the
+    candidates of all landings in order (int32), landings out of the arena)."""
+    K = int(max_candidates)
+    ci, cf, _, _ = sim.expand_samples(T, st_si, st_sf, src, action, workers)
+    valid = cf[:, SF_R] <= max_distance_m
+    G = point_rows(nextset, ci)
+    cand = np.empty((len(G), K), dtype=np.int64)
+    cnt = np.empty(len(G), dtype=np.int64)
+    sim.parallel_for(_candidates, len(G), workers, ix, G, cf, valid, float(tol_r), float(tol_theta), cand, cnt)
+    return cnt, cand[np.arange(K)[None, :] < cnt[:, None]].astype(np.int32), int((~valid).sum())
+
+
+def edge_features(T: tuple, st_si: np.ndarray, st_sf: np.ndarray, src: np.ndarray, action: np.ndarray,
+                  tgt: np.ndarray, workers: int | None = 1) -> dict:
+    """Re-simulate the edges (src[k], action[k]) -> tgt[k]: their FEATURE_COLUMNS, the snap of
+    the landing onto its target (snap_r m, snap_theta rad) and swap."""
+    _, cf, feat, swap = sim.expand_samples(T, st_si, st_sf, src, action, workers)
+    out = {k: feat[:, c].copy() for k, c in FEATURE_COLUMNS.items()}
+    out["snap_r"] = np.abs(cf[:, 0] - st_sf[tgt, 0])
+    out["snap_theta"] = np.maximum(np.abs(wrap_angle(cf[:, 1] - st_sf[tgt, 1])),
+                                   np.abs(wrap_angle(cf[:, 2] - st_sf[tgt, 2])))
+    out["swap"] = swap
+    return out
+
+
 def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r: float, tol_theta: float,
          max_distance_m: float, prune: bool = True, s_r: float = 0.5, s_theta: float = np.pi / 6,
-         max_candidates: int = 8, block: int = 20_000, progress: bool = False, workers: int = 1) -> Edges:
+         max_candidates: int = 8, block: int = 20_000, progress: bool = False, workers: int = 1,
+         backend=None) -> Edges:
     """Simulate every (state, menu action), link within (tol_r m, tol_theta rad), prune dead ends.
 
     Each landing keeps its ``max_candidates`` nearest states within tolerance (nearest first): it
     links to the first that survives pruning. Two passes keep memory small: the first keeps only
     the candidates, the second re-simulates the landings that keep an edge (deterministic, hence
-    identical) for their features, in blocks.
+    identical) for their features, in blocks of states. The simulations run on ``backend``
+    (igraph_fight.build.backend; None: this process on ``workers`` threads); pruning runs here.
     """
     S = len(st_si)
     K = int(max_candidates)
     T = tables.kernel_tuple()
-    ix = spatial.new_index(S, tol_r, tol_theta, f0, s_r, s_theta)
-    spatial.index_insert_many(ix, point_rows(tables.nextset, st_si), st_sf)
+    shards = backend.n_shards if backend is not None else 1
+    block = max(1, min(int(block), -(-S // max(1, shards)))) if S else int(block)
+    ix = None
+    if backend is None or backend.name == "local":  # the state index lives in this process
+        ix = state_index(tables.nextset, st_si, st_sf, tol_r, tol_theta, f0, s_r, s_theta)
+    if backend is not None:
+        backend.link_start(ix, st_si, st_sf, tol_r, tol_theta, f0, s_r, s_theta)
     no = tables.next_offsets
     m = st_si[:, SI_MSELF]
     loff = np.concatenate([[0], np.cumsum(no[m + 1] - no[m])]).astype(np.int64)
     L = int(loff[-1])
-    counts = np.zeros(L, dtype=np.int64)
-    cand_parts = []
-    n_out = 0
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=2 * S, desc="edges", unit="state", leave=False, dynamic_ncols=True)
-    for b in range(0, S, block):
-        e = min(S, b + block)
-        src, action = menu_rows(tables, m[b:e])
-        ci, cf, _, _ = sim.expand_samples(T, st_si, st_sf, src + b, action, workers)
-        valid = cf[:, SF_R] <= max_distance_m
-        n_out += int((~valid).sum())
-        G = point_rows(tables.nextset, ci)
-        cand = np.empty((len(G), K), dtype=np.int64)
-        cnt = np.empty(len(G), dtype=np.int64)
-        sim.parallel_for(_candidates, len(G), workers, ix, G, cf, valid, float(tol_r), float(tol_theta), cand, cnt)
-        counts[loff[b]:loff[e]] = cnt
-        cand_parts.append(cand[np.arange(K)[None, :] < cnt[:, None]].astype(np.int32))
+    spans = [(b, min(S, b + block)) for b in range(0, S, block)]
+
+    def tick(k: int) -> None:
         if bar is not None:
-            bar.update(e - b)
+            bar.update(spans[k][1] - spans[k][0])
+
+    blocks = []
+    for b, e in spans:
+        src, action = menu_rows(tables, m[b:e])
+        blocks.append((src + b, action))
+    if backend is None:
+        answers = []
+        for k, (src, action) in enumerate(blocks):
+            answers.append(landing_candidates(T, tables.nextset, ix, st_si, st_sf, src, action, max_distance_m, tol_r,
+                                              tol_theta, K, workers))
+            tick(k)
+    else:
+        answers = backend.link_candidates(blocks, max_distance_m, tol_r, tol_theta, K, on_block=tick)
+    del blocks
+    counts = np.concatenate([a[0] for a in answers]).astype(np.int64) if answers else np.zeros(0, np.int64)
+    n_out = int(sum(a[2] for a in answers))
+    cand = np.concatenate([a[1] for a in answers]).astype(np.int64) if answers else np.zeros(0, dtype=np.int64)
+    del answers
     off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    cand = np.concatenate(cand_parts).astype(np.int64) if cand_parts else np.zeros(0, dtype=np.int64)
-    del cand_parts
     linked_before = int(np.sum(counts > 0))
     # linked edges per state (reduceat mishandles empty segments: use a cumulative sum)
     linked_cum = np.concatenate([[0], np.cumsum(counts > 0)])
@@ -185,8 +233,8 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
     alive, cascaded = _prune(S, loff, off, cand, prune)
     # second pass, in blocks of states: landings of surviving states with a surviving candidate
     out = {k: [] for k in ("src", "action", "target", "swap", *FEATURE_COLUMNS, "snap_r", "snap_theta")}
-    for b in range(0, S, block):
-        e = min(S, b + block)
+    blocks = []
+    for b, e in spans:
         rows = np.arange(loff[b], loff[e])
         src = np.repeat(np.arange(b, e, dtype=np.int64), np.diff(loff[b:e + 1]))
         keep = alive[src]
@@ -195,18 +243,23 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
         keep = tgt >= 0
         rows, src, tgt = rows[keep], src[keep], tgt[keep]
         action = tables.next_ids[no[m[src]] + rows - loff[src]]
-        _, cf, feat, swap = sim.expand_samples(T, st_si, st_sf, src, action, workers)
         out["src"].append(src)
         out["action"].append(action)
         out["target"].append(tgt)
-        out["swap"].append(swap)
-        for k, c in FEATURE_COLUMNS.items():
-            out[k].append(feat[:, c].copy())
-        out["snap_r"].append(np.abs(cf[:, 0] - st_sf[tgt, 0]))
-        out["snap_theta"].append(np.maximum(np.abs(wrap_angle(cf[:, 1] - st_sf[tgt, 1])),
-                                            np.abs(wrap_angle(cf[:, 2] - st_sf[tgt, 2]))))
-        if bar is not None:
-            bar.update(e - b)
+        blocks.append((src, action, tgt))
+    if backend is None:
+        feats = []
+        for k, (src, action, tgt) in enumerate(blocks):
+            feats.append(edge_features(T, st_si, st_sf, src, action, tgt, workers))
+            tick(k)
+    else:
+        feats = backend.link_features(blocks, on_block=tick)
+    for cols in feats:
+        for k in ("swap", *FEATURE_COLUMNS, "snap_r", "snap_theta"):
+            out[k].append(cols[k])
+    del blocks, feats
+    if backend is not None:
+        backend.link_stop()
     if bar is not None:
         bar.close()
     cat = {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in out.items()}
@@ -216,4 +269,3 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
     cols = {k: cat[k] for k in (*FEATURE_COLUMNS, "snap_r", "snap_theta")}
     return Edges(cat["src"].astype(np.int64), cat["action"].astype(np.int64), cat["target"].astype(np.int64),
                  cat["swap"].astype(np.int8), cols, alive, stats)
-

@@ -161,10 +161,23 @@ def score_children(T: tuple, ix: tuple, nextset: np.ndarray, next_offsets: np.nd
     return C
 
 
+def expand_and_score(T: tuple, ix: tuple, nextset: np.ndarray, next_offsets: np.ndarray, next_ids: np.ndarray,
+                     si: np.ndarray, sf: np.ndarray, parent: np.ndarray, action: np.ndarray, max_distance_m: float,
+                     link_r_m: float, link_theta_rad: float, workers: int | None = 1) -> tuple:
+    """Children of (si[parent[k]], sf[parent[k]]) under action[k] and their scores C: (ci, cf,
+    feat, C); children beyond ``max_distance_m`` score 0."""
+    ci, cf, feat, _ = sim.expand_samples(T, si, sf, parent, action, workers)
+    valid = cf[:, SF_R] <= max_distance_m
+    C = score_children(T, ix, nextset, next_offsets, next_ids, ci, cf, valid, link_r_m, link_theta_rad, workers)
+    return ci, cf, feat, C
+
+
 @njit(cache=True)
-def dedup_insert(ix, nextset, ci, cf, valid, tol_r, tol_t):
+def dedup_insert(ix, dix, nextset, ci, cf, valid, tol_r, tol_t):
     """Insert the valid children that are not within (tol_r, tol_t) of an indexed sample, in
-    order; returns the new ids (-1: duplicate, invalid or no room)."""
+    order, into both indexes; returns the new ids (-1: duplicate, invalid or no room). ``dix``
+    holds the same points as ``ix`` on a grid as fine as the duplicate tolerance (a query then
+    scans a few points, not a linking-tolerance cell's many); the answer does not depend on it."""
     K = len(ci)
     out = np.full(K, -1, dtype=np.int64)
     g = np.empty(4, dtype=np.int64)
@@ -174,11 +187,12 @@ def dedup_insert(ix, nextset, ci, cf, valid, tol_r, tol_t):
         if not valid[k]:
             continue
         _point(nextset, ci[k], g)
-        if spatial.index_search(ix, g, cf[k, 0], cf[k, 1], cf[k, 2], tol_r, tol_t, False, no_i, no_d) >= 0:
+        if spatial.index_search(dix, g, cf[k, 0], cf[k, 1], cf[k, 2], tol_r, tol_t, False, no_i, no_d) >= 0:
             continue
         out[k] = spatial.index_insert(ix, g, cf[k, 0], cf[k, 1], cf[k, 2])
         if out[k] < 0:
             break
+        spatial.index_insert(dix, g, cf[k, 0], cf[k, 1], cf[k, 2])
     return out
 
 
@@ -293,7 +307,7 @@ def _load_checkpoint(path: Path, run: _Run) -> dict:
 def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: str | os.PathLike | None = None,
             fingerprint: str = "", progress: bool = False,
             on_chunk: Callable[[int, int], None] | None = None, workers: int = 1,
-            extra_initial: tuple[np.ndarray, np.ndarray] | None = None) -> Archive:
+            extra_initial: tuple[np.ndarray, np.ndarray] | None = None, backend=None) -> Archive:
     """Run the sampler and return the archive.
 
     Args:
@@ -309,11 +323,12 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
         workers: threads (None or 0: all cores); the result does not depend on it.
         extra_initial: more initial samples (si, sf), appended to the spread (e.g.
             igraph_fight.seeding.bout_seed_states); duplicates are dropped as usual.
+        backend: where children are simulated and scored (igraph_fight.build.backend; None:
+            this process on ``workers`` threads); deduplication and selection run here.
     """
     o = options
     if o.selection not in ("round", "parent"):
         raise ValueError(f"selection must be 'round' or 'parent', not {o.selection!r}")
-    T = tables.kernel_tuple()
     cap = int(o.max_samples)
     run = _Run(cap)
     ckpt = Path(checkpoint) if checkpoint else None
@@ -326,16 +341,19 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
         raise ValueError("the duplicate tolerance must not exceed the linking tolerance")
     ix = spatial.new_index(cap, o.link_r_m, o.link_theta_rad, o.f0)
     dtr, dtt = o.dedup_r_m, o.dedup_theta_rad
+    dix = spatial.new_index(cap, dtr, dtt, o.f0)
     nextset = tables.nextset
     if run.n:
-        spatial.index_insert_many(ix, point_rows(nextset, run.si[:run.n]), run.sf[:run.n])
+        keys = point_rows(nextset, run.si[:run.n])
+        spatial.index_insert_many(ix, keys, run.sf[:run.n])
+        spatial.index_insert_many(dix, keys, run.sf[:run.n])
     else:
         si0, sf0 = initial_samples(tables, o, seed)
         if extra_initial is not None and len(extra_initial[0]):
             si0 = np.concatenate([si0, np.asarray(extra_initial[0], dtype=np.int64)])
             sf0 = np.concatenate([sf0, np.asarray(extra_initial[1], dtype=np.float64)])
         valid = sf0[:, SF_R] <= o.max_distance_m
-        ids = dedup_insert(ix, nextset, si0, sf0, valid, dtr, dtt)
+        ids = dedup_insert(ix, dix, nextset, si0, sf0, valid, dtr, dtt)
         keep = ids >= 0
         k = int(keep.sum())
         run.si[:k] = si0[keep]
@@ -345,6 +363,8 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
         run.round_start = k
         if ckpt is not None:
             _save_checkpoint(ckpt, run, fingerprint)
+    if backend is not None:
+        backend.sampler_start(ix, cap, o.link_r_m, o.link_theta_rad, o.f0, run.si[:run.n], run.sf[:run.n])
 
     bar = None
     if progress:
@@ -378,7 +398,7 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
                     run.done, run.reason = True, "max_rounds"
                     break
             chunk = run.frontier[run.pos:run.pos + o.chunk_parents]
-            added, n_children = _expand_chunk(T, tables, ix, run, chunk, o, dtr, dtt, workers)
+            added, n_children = _expand_chunk(tables, ix, dix, run, chunk, o, dtr, dtt, backend, workers)
             run.round_children += n_children
             run.pos += len(chunk)
             run.round_new += added
@@ -398,13 +418,15 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
     finally:
         if bar is not None:
             bar.close()
+        if backend is not None:
+            backend.sampler_stop()
     n = run.n
     return Archive(run.si[:n].copy(), run.sf[:n].copy(), run.parent[:n].copy(), run.action[:n].copy(),
                    run.depth[:n].copy(), run.score_c[:n].copy(), run.score_j[:n].copy(), run.round, run.reason)
 
 
-def _expand_chunk(T, tables: SimTables, ix, run: _Run, chunk: np.ndarray, o: ExploreOptions,
-                  dtr: float, dtt: float, workers: int = 1) -> tuple[int, int]:
+def _expand_chunk(tables: SimTables, ix, dix, run: _Run, chunk: np.ndarray, o: ExploreOptions,
+                  dtr: float, dtt: float, backend, workers: int | None = 1) -> tuple[int, int]:
     """Expand the frontier nodes of one chunk; returns (new samples archived, children simulated)."""
     no, ni = tables.next_offsets, tables.next_ids
     m = run.si[chunk, SI_MSELF]
@@ -413,14 +435,20 @@ def _expand_chunk(T, tables: SimTables, ix, run: _Run, chunk: np.ndarray, o: Exp
     starts = np.repeat(no[m], counts)
     local = np.arange(len(parent)) - np.repeat(np.cumsum(counts) - counts, counts)
     action = ni[starts + local]
-    ci, cf, feat, _ = sim.expand_samples(T, run.si, run.sf, parent, action, workers)
+    if backend is None:
+        ci, cf, feat, C = expand_and_score(tables.kernel_tuple(), ix, tables.nextset, no, ni, run.si, run.sf, parent,
+                                           action, o.max_distance_m, o.link_r_m, o.link_theta_rad, workers)
+    else:
+        ci, cf, feat, C = backend.sampler_expand(run.si, run.sf, parent, action, o.max_distance_m, o.link_r_m,
+                                                 o.link_theta_rad)
     valid = cf[:, SF_R] <= o.max_distance_m
-    C = score_children(T, ix, tables.nextset, no, ni, ci, cf, valid, o.link_r_m, o.link_theta_rad, workers)
     J = (feat[:, sim.FT_NEAR_SELF] + feat[:, sim.FT_NEAR_OTHER] + feat[:, sim.FT_DEF_SELF]
          + feat[:, sim.FT_DEF_OTHER])
-    ids = dedup_insert(ix, tables.nextset, ci, cf, valid, dtr, dtt)
+    ids = dedup_insert(ix, dix, tables.nextset, ci, cf, valid, dtr, dtt)
     new = ids >= 0
     k = int(new.sum())
+    if backend is not None:
+        backend.sampler_archived(ci[new], cf[new])  # ids ascend with k: the replicas insert them in id order
     if k:
         dst = ids[new]
         run.si[dst] = ci[new]

@@ -30,7 +30,6 @@ import numpy as np
 from motion_graph.atomic import atomic_write_text, fsync_dir, kill_point
 
 from igraph_fight.build import cluster, edges, explore
-from igraph_fight import sim
 from igraph_fight.graph import FORMAT, VERSION, InteractionGraph, library_fingerprint, package_version
 from igraph_fight.build.seeding import SEED_PAIRINGS
 from igraph_fight.sim import SI_FOTHER, SI_MASK, SI_MOTHER, SI_MSELF, SimParams, SimTables
@@ -156,12 +155,17 @@ def peak_rss_mb() -> float:
 def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, workers: int | None = 1,
                 checkpoint_dir: str | os.PathLike | None = None, progress: bool = False,
                 on_chunk: Callable[[int, int], None] | None = None,
-                keep_checkpoint: bool = False, out: str | os.PathLike | None = None) -> tuple[InteractionGraph, dict]:
+                keep_checkpoint: bool = False, out: str | os.PathLike | None = None, backend: str = "local",
+                address: str | None = None) -> tuple[InteractionGraph, dict]:
     """Build the Interaction Graph of ``library`` (a motion_graph.ActionLibrary).
 
     Args:
         options: build options; seed: seeds the sampler's initial states.
-        workers: threads (None or 0: all cores); does not change the result.
+        workers: threads of the local backend, Ray actors of the ray backend (None or 0: all
+            cores); does not change the result.
+        backend: where the sampler, clustering and linking run: ``local`` (this process) or
+            ``ray`` (igraph_fight.build.ray_backend; ``address``: a running cluster's, else a
+            local Ray is started); the same graph and content hash either way.
         checkpoint_dir: folder for the sampler checkpoint (``archive.npz``); a build with the same
             library, options and seed resumes from it; one with other inputs raises ValueError.
             Removed after success (after ``out`` is in place) unless ``keep_checkpoint``.
@@ -185,35 +189,45 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         if not meta.exists():
             atomic_write_text(meta, json.dumps({"fingerprint": fp, "options": options.to_json(), "seed": seed,
                                                 "library": lib_fp}, indent=1))
-    t = time.perf_counter()
-    resumed = ckpt is not None and ckpt.exists()
-    extra = None
-    if options.seed_bouts > 0 and not resumed:
-        from igraph_fight.build.seeding import bout_seed_states
-        extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed,
-                                 options.seed_pairing)
-
     def chunk_done(chunks: int, n: int) -> None:
         kill_point("sample")
         if on_chunk is not None:
             on_chunk(chunks, n)
 
-    arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, chunk_done, workers,
-                          extra_initial=extra)
-    timings["explore_s"] = time.perf_counter() - t
-
-    kill_point("cluster")
+    from igraph_fight.build.backend import make_backend
     t = time.perf_counter()
-    grows = explore.group_rows(tables.nextset, arc.si, options.f0)
-    cl = cluster.cluster_samples(grows, arc.si, arc.sf, options.cluster_options())
-    timings["cluster_s"] = time.perf_counter() - t
+    runner = make_backend(backend, tables, workers, address)
+    timings["backend_start_s"] = time.perf_counter() - t
+    resumed = ckpt is not None and ckpt.exists()
+    try:
+        t = time.perf_counter()
+        extra = None
+        if options.seed_bouts > 0 and not resumed:
+            from igraph_fight.build.seeding import bout_seed_states
+            extra = bout_seed_states(library, tables, options.seed_bouts, options.seed_bout_seconds, seed,
+                                     options.seed_pairing, backend=runner)
+        timings["seed_bouts_s"] = time.perf_counter() - t
 
-    kill_point("link")
-    t = time.perf_counter()
-    ed = edges.link(tables, cl.si, cl.sf, options.f0, options.link_tol_r_m, options.link_tol_theta_rad,
-                    options.max_distance_m, options.prune_dead_ends, options.s_r_m, options.s_theta_rad,
-                    options.max_candidates, progress=progress, workers=workers)
-    timings["edges_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        arc = explore.explore(tables, options.explore_options(), seed, ckpt, fp, progress, chunk_done, workers,
+                              extra_initial=extra, backend=runner)
+        timings["explore_s"] = time.perf_counter() - t
+
+        kill_point("cluster")
+        t = time.perf_counter()
+        grows = explore.group_rows(tables.nextset, arc.si, options.f0)
+        cl = cluster.cluster_samples(grows, arc.si, arc.sf, options.cluster_options(), backend=runner)
+        timings["cluster_s"] = time.perf_counter() - t
+
+        kill_point("link")
+        t = time.perf_counter()
+        ed = edges.link(tables, cl.si, cl.sf, options.f0, options.link_tol_r_m, options.link_tol_theta_rad,
+                        options.max_distance_m, options.prune_dead_ends, options.s_r_m, options.s_theta_rad,
+                        options.max_candidates, progress=progress, workers=workers, backend=runner)
+        timings["edges_s"] = time.perf_counter() - t
+        backend_report = runner.report()
+    finally:
+        runner.close()
 
     t = time.perf_counter()
     graph, rep = _assemble(tables, cl, ed, options)
@@ -223,7 +237,7 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         "resumed_from_checkpoint": bool(resumed),
         "build_seconds": time.perf_counter() - t_start, "peak_rss_mb": peak_rss_mb(),
         "timings": {k: round(v, 3) for k, v in timings.items()},
-        "workers": sim.resolve_workers(workers), "seed": int(seed),
+        "workers": backend_report["workers"], "backend": backend_report, "seed": int(seed),
     })
     from motion_graph.classify import KINDS
     graph.header.update({
@@ -232,7 +246,7 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
                     "sources": sorted({os.path.basename(s) for s in library.sources})},
         "options": options.to_json(), "seed": int(seed), "package_version": package_version(),
         "report": {k: v for k, v in rep.items() if k not in ("build_seconds", "peak_rss_mb", "timings", "workers",
-                                                             "resumed_from_checkpoint")},
+                                                             "resumed_from_checkpoint", "backend")},
     })
     graph.arrays["library_npz"] = np.frombuffer(library.to_bytes(), dtype=np.uint8)
     rep["content_hash"] = graph.content_hash

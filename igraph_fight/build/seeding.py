@@ -21,13 +21,30 @@ SEED_PAIRINGS = ("human", "random")
 
 
 def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float, seed: int,
-                     pairing: str = "human") -> tuple[np.ndarray, np.ndarray]:
+                     pairing: str = "human", backend=None) -> tuple[np.ndarray, np.ndarray]:
     """Canonical samples (si (N, N_SI), sf (N, N_SF)) of both fighters at every decision of
     ``n_bouts`` bouts of ``seconds`` between the human proxy and a second human proxy
     (``pairing="human"``) or a random fighter (``"random"``; slots alternate), started from the
-    game's random initial states drawn from ``seed``."""
+    game's random initial states drawn from ``seed``. Bouts are independent (each has its own
+    generator, drawn in order from ``seed``): ``backend`` (igraph_fight.build.backend) may play
+    runs of them elsewhere; the rows come back in bout order either way."""
     if pairing not in SEED_PAIRINGS:
         raise ValueError(f"pairing must be one of {', '.join(SEED_PAIRINGS)}, not {pairing!r}")
+    rng = np.random.default_rng(seed)
+    seeds = np.array([rng.integers(1 << 62) for _ in range(int(n_bouts))], dtype=np.int64)
+    if backend is None:
+        parts = [seed_bout_range(library, tables, seconds, pairing, seeds, 0)]
+    else:
+        parts = backend.seed_bouts(library, seconds, pairing, seeds)
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        return np.zeros((0, N_SI), dtype=np.int64), np.zeros((0, N_SF), dtype=np.float64)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def seed_bout_range(library, tables: SimTables, seconds: float, pairing: str, seeds: np.ndarray,
+                    first: int) -> tuple[np.ndarray, np.ndarray]:
+    """The decision samples of bouts first, first + 1, ... (bout first + j seeded by seeds[j])."""
     from igraph_fight.agents.base import RandomAgent
     from igraph_fight.agents.human import HumanProxyAgent
     from igraph_fight.game import FightGame, GameConfig
@@ -54,10 +71,10 @@ def bout_seed_states(library, tables: SimTables, n_bouts: int, seconds: float, s
 
     # one pair of agents for all bouts: run_bout resets them (generator, what they saw) each time
     fighters = [_Recorder(HumanProxyAgent()), _Recorder(HumanProxyAgent() if pairing == "human" else RandomAgent())]
-    rng = np.random.default_rng(seed)
-    for i in range(n_bouts):
+    for j, s in enumerate(seeds):
+        i = int(first) + j
         pair = fighters[::-1] if i % 2 else fighters
-        run_bout(game, pair, seconds, np.random.default_rng(rng.integers(1 << 62)))
+        run_bout(game, pair, seconds, np.random.default_rng(int(s)))
     if not si_rows:
         return np.zeros((0, N_SI), dtype=np.int64), np.zeros((0, N_SF), dtype=np.float64)
     return np.stack(si_rows), np.stack(sf_rows)

@@ -23,7 +23,13 @@ def register(sub) -> None:
     p.add_argument("--seconds", type=positive_float, default=60.0, help="bout length (default 60 s)")
     p.add_argument("--seed", type=non_negative_int, default=0)
     p.add_argument("--out", default="out/eval", help="output folder (report.md, results.json, plots)")
-    p.add_argument("--workers", type=positive_int, default=1, help="bout worker processes (default 1)")
+    p.add_argument("--workers", type=positive_int, default=None,
+                   help="bout worker processes (default 1), or Ray actors with --backend ray (default: every CPU)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="play the bouts here (default) or on Ray actors (pip install 'igraph-fight[ray]'); "
+                        "the same results")
+    p.add_argument("--address", default=None, metavar="auto|HOST:PORT",
+                   help="with --backend ray: join this running Ray cluster (default: start Ray on this machine)")
     p.add_argument("--style", default="infighter", help="IG fighter's (and game tree's) style (default infighter)")
     p.add_argument("--rl-checkpoint", default=None, help="RL policy (default igraph_fight/checkpoints/rl_infighter.pt)")
     p.add_argument("--rl-outboxer-checkpoint", default=None,
@@ -73,12 +79,19 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from igraph_fight.evaluate.runner import evaluate
 
     load_style(args.style)          # an unknown style fails here, before any policy is computed
+    if args.address is not None and args.backend != "ray":
+        raise ValueError("--address needs --backend ray")
+    if args.backend == "ray":
+        from igraph_fight.build.backend import require_ray
+        require_ray()
     depths = tuple(int(d) for d in _list(args.depths))
     if not depths:
         raise ValueError("--depths: at least one depth is needed")
     cfg = EvalConfig(graph=args.graph, opponents=_known(_list(args.opponents), OPPONENTS, "--opponents"),
                      depths=depths, exact2_depths=tuple(int(d) for d in _list(args.exact2_depths)),
-                     bouts=args.bouts, seconds=args.seconds, seed=args.seed, workers=args.workers, style=args.style,
+                     bouts=args.bouts, seconds=args.seconds, seed=args.seed, style=args.style,
+                     workers=args.workers or (0 if args.backend == "ray" else 1), backend=args.backend,
+                     address=args.address,
                      rl_checkpoint=args.rl_checkpoint, rl_outboxer_checkpoint=args.rl_outboxer_checkpoint,
                      train_rl=args.train_rl, rl_decisions=args.rl_decisions, rl_cpu_minutes=args.rl_minutes,
                      rl_retrain_decisions=args.rl_retrain_decisions,

@@ -64,7 +64,14 @@ def register(sub) -> None:
     p.add_argument("--guard", type=float, default=None, metavar="RADIUS_M",
                    help="block strikes at the other's forearms (capsules of this radius, e.g. 0.05; default: no guard)")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler's initial states (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="threads (0: all cores); the result does not depend on it")
+    p.add_argument("--workers", type=int, default=1,
+                   help="threads of the local backend, Ray actors of the ray backend (0: all cores); "
+                        "the result does not depend on it")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="where the sampler, clustering and linking run: this process (default) or Ray actors "
+                        "(needs: pip install 'igraph-fight[ray]'); the same graph and content hash")
+    p.add_argument("--address", default=None, metavar="auto|HOST:PORT",
+                   help="with --backend ray: join this running Ray cluster (default: start Ray on this machine)")
     p.add_argument("--checkpoint", default=None, help="checkpoint folder (default OUT.ckpt)")
     p.add_argument("--restart", action="store_true", help="discard an existing checkpoint and start over")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -144,6 +151,16 @@ def cmd_build(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"igraph-fight: error: {e}", file=sys.stderr)
         return 2
+    if args.address is not None and args.backend != "ray":
+        print("igraph-fight: error: --address needs --backend ray", file=sys.stderr)
+        return 2
+    if args.backend == "ray":
+        from igraph_fight.build.backend import BackendUnavailable, require_ray
+        try:
+            require_ray()
+        except BackendUnavailable as e:
+            print(f"igraph-fight: error: {e}", file=sys.stderr)
+            return 2
     show = not args.quiet and sys.stderr.isatty()
     if args.library:
         lib = load_library(args.library)
@@ -166,7 +183,7 @@ def cmd_build(args: argparse.Namespace) -> int:
             print(f"resuming from {ckpt} ({header.get('n')} samples)", file=sys.stderr)
     # the graph file is in place before the checkpoint goes: a kill at any point, then the same command, resumes
     _, rep = build_graph(lib, options, seed=args.seed, workers=args.workers, checkpoint_dir=ckpt, progress=show,
-                         out=args.out)
+                         out=args.out, backend=args.backend, address=args.address)
     rep["graph_seconds"] = rep["build_seconds"]
     rep["build_seconds"] = time.perf_counter() - t0
     rep["out"] = str(args.out)
@@ -179,6 +196,10 @@ def cmd_build(args: argparse.Namespace) -> int:
           f"{rep['n_states_before_pruning']} states); snapping mean {rep['snap_mean_cm']:.1f} cm / "
           f"{rep['snap_mean_deg']:.1f} deg, max {rep['snap_max_cm']:.1f} cm / {rep['snap_max_deg']:.1f} deg; "
           f"edge landing mean {rep['edge_snap_mean_cm']:.1f} cm / {rep['edge_snap_mean_deg']:.1f} deg")
+    b = rep["backend"]
+    if b["backend"] == "ray":
+        print(f"ray backend: {b['workers']} workers on {b['nodes']} node(s), worker peak memory "
+              f"{max(b['worker_peak_rss_mb']):.0f} MiB")
     print(f"content hash {rep['content_hash']}")
     print(f"graph written to {args.out}")
     return 0

@@ -54,7 +54,9 @@ class EvalConfig:
     bouts: int = 20
     seconds: float = 60.0
     seed: int = 0
-    workers: int = 1
+    workers: int = 1                            # bout processes (local), Ray actors (ray; 0: every CPU)
+    backend: str = "local"                      # "local" or "ray" (evaluate.ray_runner)
+    address: str | None = None                  # ray: a running cluster's address (default: start Ray here)
     style: str = "infighter"
     rl_checkpoint: str | None = None            # default: igraph_fight/checkpoints/rl_infighter.pt
     rl_outboxer_checkpoint: str | None = None   # default: igraph_fight/checkpoints/rl_outboxer.pt

@@ -23,8 +23,9 @@ baseline's budget, learning curve, head-to-head bouts (with its outboxer retrain
 planner's style-swap time. With ``human_logs``, the bouts people saved in `igraph-fight play`
 give the real human column (evaluate.human_logs), reported beside the scripted proxy's.
 
-Bouts run in ``workers`` processes (fork; each task is self-contained and seeded, so results
-do not depend on the worker count). Everything but timings is a function of the graph, the
+Bouts run in ``workers`` processes (fork), or with ``backend="ray"`` on Ray actors
+(evaluate.ray_runner); each task is self-contained and seeded, so results do not depend on the
+worker count or the backend. Everything but timings is a function of the graph, the
 checkpoints and the seed: ``results_digest`` (sha256 of the deterministic part) is identical
 for identical inputs.
 """
@@ -193,10 +194,15 @@ class _Watch:
 
 
 def run_task(task: dict) -> dict:
-    """One bout: task = {id, row, col, i}. Returns the deterministic outcome and the timings."""
+    """One bout: task = {id, row, col, i}, in this process's context. Returns the deterministic
+    outcome and the timings."""
+    return run_task_in(_CTX, task)
+
+
+def run_task_in(ctx: dict, task: dict) -> dict:
+    """One bout in the evaluation context ``ctx`` (build_context)."""
     from igraph_fight.match import run_bout
 
-    ctx = _CTX
     cfg: EvalConfig = ctx["cfg"]
     game = ctx["game"]
     i = int(task["i"])
@@ -340,7 +346,18 @@ def evaluate(cfg: EvalConfig, out: str | Path) -> dict:
         from tqdm import tqdm
         bar = tqdm(total=len(tasks), desc="bouts", unit="bout", file=sys.stderr)
     t_b = time.perf_counter()
-    if cfg.workers <= 1:
+    backend = {"backend": "local", "workers": cfg.workers}
+    if cfg.backend == "ray":
+        from igraph_fight.evaluate.ray_runner import run_tasks_on_ray
+
+        def got(r: dict) -> None:
+            results[r["id"]] = r
+            if bar is not None:
+                bar.update(1)
+        order = sorted(tasks, key=lambda t: -_cost_hint(t))
+        backend = run_tasks_on_ray(cfg, ctx["rl"], order, got, build_context, run_task_in, cfg.workers or None,
+                                   cfg.address)
+    elif cfg.workers <= 1:
         for t in tasks:
             results[t["id"]] = run_task(t)
             if bar is not None:
@@ -365,6 +382,7 @@ def evaluate(cfg: EvalConfig, out: str | Path) -> dict:
         report["human_logs"] = human_table(cfg.human_logs, cfg.depths, ctx["graph"].content_hash)
     report["style_swap_ms"] = swap.get("median_ms")
     report["timing"]["style_swap"] = swap
+    report["timing"]["backend"] = backend
     report["timing"].update({"setup_s": t_setup, "rl_s": t_rl, "bouts_s": t_bouts,
                              "wall_s": time.perf_counter() - t0, "parent_cpu_s": time.process_time() - c0})
     plots(report, rl, out)

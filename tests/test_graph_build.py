@@ -314,6 +314,11 @@ def test_atomic_write_removes_only_stale_temp_files_of_dead_writers(tmp_path):
 def test_workers_do_not_change_the_graph(lib, built):
     g, _ = build_graph(lib, SMALL, seed=0, workers=2)
     assert g.content_hash == built[0].content_hash
+    # seed bouts: one process, or shared by two forked ones
+    seeded = dataclasses.replace(SMALL, max_samples=4000, seed_bouts=8, seed_bout_seconds=5.0)
+    g1, r1 = build_graph(lib, seeded, seed=0, workers=1)
+    g2, r2 = build_graph(lib, seeded, seed=0, workers=2)
+    assert g1.content_hash == g2.content_hash and r1["n_samples"] == r2["n_samples"]
 
 
 def test_cli_build_info_export(lib, tmp_path, capsys):

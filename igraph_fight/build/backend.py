@@ -18,7 +18,7 @@ deterministic and row-independent, so the graph and its content hash do not depe
 backend or the worker count. The stages' own functions (explore.explore, cluster.cluster_samples,
 edges.link, seeding.bout_seed_states) run in this process when given no backend.
 ``LocalBackend`` runs one StageWorker in this process on ``workers`` threads and shares the
-driver's index (nothing is copied). ``RayBackend`` (ray_backend.py, needs the optional ``ray``
+driver's index (nothing is copied); its seed bouts run in ``workers`` forked processes. ``RayBackend`` (ray_backend.py, needs the optional ``ray``
 extra) runs one StageWorker per Ray actor, spread over the cluster's nodes. ``BACKENDS`` is the
 registry the CLI reads.
 
@@ -36,7 +36,7 @@ import numpy as np
 
 from igraph_fight import sim
 from igraph_fight.build.stages import (RAY_INSTALL_HINT, BackendUnavailable, OpClock, StageWorker,
-                                       cluster_in_shards, require_ray)
+                                       cluster_in_shards, require_ray, row_shards)
 from igraph_fight.sim import SimTables
 
 __all__ = ["BACKENDS", "Backend", "BackendUnavailable", "LocalBackend", "RAY_INSTALL_HINT", "make_backend",
@@ -93,8 +93,18 @@ class LocalBackend:
         self.clock = OpClock()
 
     def seed_bouts(self, library, seconds, pairing, seeds) -> list:
+        """The seed bouts in this process, or with several workers in as many forked processes
+        (bouts are Python: threads would not run them side by side)."""
+        import multiprocessing as mp
+
+        from igraph_fight.build.seeding import seed_bout_range
         with self.clock("seed_bouts"):
-            return [self.worker.seed_bouts(library, seconds, pairing, seeds, 0)]
+            if self.workers <= 1 or len(seeds) < 2 * self.workers or "fork" not in mp.get_all_start_methods():
+                return [self.worker.seed_bouts(library, seconds, pairing, seeds, 0)]
+            shards = row_shards(len(seeds), self.workers)
+            with mp.get_context("fork").Pool(len(shards)) as pool:
+                return pool.starmap(seed_bout_range, [(library, self.worker.tables, seconds, pairing, seeds[lo:hi], lo)
+                                                      for lo, hi in shards])
 
     def sampler_start(self, ix, capacity, link_r_m, link_theta_rad, f0, si, sf) -> None:
         self.worker.sampler_use_index(ix)

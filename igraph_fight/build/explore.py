@@ -329,6 +329,7 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
     o = options
     if o.selection not in ("round", "parent"):
         raise ValueError(f"selection must be 'round' or 'parent', not {o.selection!r}")
+    T = tables.kernel_tuple()
     cap = int(o.max_samples)
     run = _Run(cap)
     ckpt = Path(checkpoint) if checkpoint else None
@@ -398,7 +399,7 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
                     run.done, run.reason = True, "max_rounds"
                     break
             chunk = run.frontier[run.pos:run.pos + o.chunk_parents]
-            added, n_children = _expand_chunk(tables, ix, dix, run, chunk, o, dtr, dtt, backend, workers)
+            added, n_children = _expand_chunk(T, tables, ix, dix, run, chunk, o, dtr, dtt, backend, workers)
             run.round_children += n_children
             run.pos += len(chunk)
             run.round_new += added
@@ -425,7 +426,7 @@ def explore(tables: SimTables, options: ExploreOptions, seed: int, checkpoint: s
                    run.depth[:n].copy(), run.score_c[:n].copy(), run.score_j[:n].copy(), run.round, run.reason)
 
 
-def _expand_chunk(tables: SimTables, ix, dix, run: _Run, chunk: np.ndarray, o: ExploreOptions,
+def _expand_chunk(T: tuple, tables: SimTables, ix, dix, run: _Run, chunk: np.ndarray, o: ExploreOptions,
                   dtr: float, dtt: float, backend, workers: int | None = 1) -> tuple[int, int]:
     """Expand the frontier nodes of one chunk; returns (new samples archived, children simulated)."""
     no, ni = tables.next_offsets, tables.next_ids
@@ -436,8 +437,8 @@ def _expand_chunk(tables: SimTables, ix, dix, run: _Run, chunk: np.ndarray, o: E
     local = np.arange(len(parent)) - np.repeat(np.cumsum(counts) - counts, counts)
     action = ni[starts + local]
     if backend is None:
-        ci, cf, feat, C = expand_and_score(tables.kernel_tuple(), ix, tables.nextset, no, ni, run.si, run.sf, parent,
-                                           action, o.max_distance_m, o.link_r_m, o.link_theta_rad, workers)
+        ci, cf, feat, C = expand_and_score(T, ix, tables.nextset, no, ni, run.si, run.sf, parent, action,
+                                           o.max_distance_m, o.link_r_m, o.link_theta_rad, workers)
     else:
         ci, cf, feat, C = backend.sampler_expand(run.si, run.sf, parent, action, o.max_distance_m, o.link_r_m,
                                                  o.link_theta_rad)

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from igraph_fight.build.stages import OpClock, StageWorker, cluster_in_shards, require_ray, row_shards
+from igraph_fight.build.stages import OpClock, StageWorker, cluster_in_shards, connect_ray, row_shards
 from igraph_fight.sim import SimTables
 
 
@@ -39,17 +39,8 @@ class RayBackend:
     name = "ray"
 
     def __init__(self, tables: SimTables, workers: int | None = None, address: str | None = None) -> None:
-        ray = require_ray()
+        ray, self.started, n = connect_ray(workers, address)
         self.ray = ray
-        self.started = False
-        if not ray.is_initialized():
-            kw = {"include_dashboard": False, "logging_level": "ERROR", "log_to_driver": False}
-            if address:
-                ray.init(address=address, **kw)
-            else:
-                ray.init(num_cpus=workers or None, **kw)
-            self.started = True
-        n = int(workers) if workers else max(1, int(ray.cluster_resources().get("CPU", 1)))
         Actor = ray.remote(num_cpus=1)(RayStageWorker)
         tables_ref = ray.put(tables)
         self.actors = [Actor.options(scheduling_strategy="SPREAD").remote(tables_ref) for _ in range(n)]

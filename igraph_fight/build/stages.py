@@ -221,3 +221,21 @@ def require_ray():
     except ImportError:
         raise BackendUnavailable(RAY_INSTALL_HINT) from None
     return ray
+
+
+def connect_ray(workers: int | None = None, address: str | None = None) -> tuple[object, bool, int]:
+    """(the ray module, whether this call started Ray, how many one-CPU actors to run). Joins Ray
+    if this process already initialised it, else the cluster at ``address`` (``auto`` or
+    HOST:PORT), else starts Ray on this machine with ``workers`` CPUs. Actors: ``workers``, or
+    (None or 0) every CPU of the cluster."""
+    ray = require_ray()
+    started = False
+    if not ray.is_initialized():
+        kw = {"include_dashboard": False, "logging_level": "ERROR", "log_to_driver": False}
+        if address:
+            ray.init(address=address, **kw)
+        else:
+            ray.init(num_cpus=workers or None, **kw)
+        started = True
+    n = int(workers) if workers else max(1, int(ray.cluster_resources().get("CPU", 1)))
+    return ray, started, n

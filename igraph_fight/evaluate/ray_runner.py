@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from igraph_fight.build.stages import require_ray
+from igraph_fight.build.stages import connect_ray
 from igraph_fight.evaluate.config import EvalConfig
 
 
@@ -35,14 +35,8 @@ def run_tasks_on_ray(cfg: EvalConfig, rl: dict, tasks: list[dict], on_result: Ca
                      address: str | None = None) -> dict:
     """Play ``tasks`` on Ray actors (``workers``; None: one per CPU of the cluster), calling
     ``on_result`` as each bout finishes; returns {"workers", "nodes"} (nodes that played bouts)."""
-    ray = require_ray()
-    started = False
-    if not ray.is_initialized():
-        kw = {"include_dashboard": False, "logging_level": "ERROR", "log_to_driver": False}
-        ray.init(address=address, **kw) if address else ray.init(num_cpus=workers or None, **kw)
-        started = True
+    ray, started, n = connect_ray(workers, address)
     try:
-        n = int(workers) if workers else max(1, int(ray.cluster_resources().get("CPU", 1)))
         n = max(1, min(n, len(tasks)))
         cfg_ref = ray.put(cfg)
         rl_ref = ray.put(rl)

@@ -17,13 +17,17 @@ Starts the server as its own process (`igraph-fight play --port 0`), then measur
      from the press (in the page) to the decision's arrival (in the page) and from the server's
      receipt to the decision, against A's decision interval (the duration of A's action the key
      fell into). Target: every press reaches A's next decision, within one decision interval.
-Client and server share the machine: on a 2-core VM the figures include the client's own cost
-and the neighbours' load (printed first). Nothing is asserted.
+Client and server share the machine: the figures include the client's own cost and the
+neighbours' load (printed first). With two or more CPUs, part A runs twice: with the server's
+process on one CPU and the clients on another (``pinned``: neither waits for the other's
+time slice, as when an engine and the NPC service run on separate cores), then unpinned, both free
+to run anywhere. Nothing is asserted.
 """
 from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import json
 import os
 import random
@@ -51,6 +55,16 @@ def machine() -> str:
     except OSError:
         pass
     return f"{cpu}, {os.cpu_count()} cores, load {load}"
+
+
+def set_cpus(pid: int, cpus: set[int]) -> None:
+    """Every thread of process ``pid`` (0: this one) allowed on ``cpus`` only."""
+    tasks = Path(f"/proc/{pid or os.getpid()}/task")
+    for tid in ([int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [pid]):
+        try:
+            os.sched_setaffinity(tid, cpus)
+        except (ProcessLookupError, PermissionError):
+            pass
 
 
 def start_server(graph: str, save_dir: str) -> tuple[subprocess.Popen, str]:
@@ -248,6 +262,7 @@ def main() -> None:
     ap.add_argument("--page-seconds", type=float, default=15.0, help="fps samples of the page (default 15)")
     ap.add_argument("--presses", type=int, default=12, help="key presses (default 12)")
     ap.add_argument("--no-page", action="store_true", help="skip the browser parts (B, C)")
+    ap.add_argument("--no-pin", action="store_true", help="measure A unpinned only")
     ap.add_argument("--json", default=None, help="write the figures to this JSON file")
     ap.add_argument("--screenshot", default=None, help="also save a picture of the page (e.g. docs/media/play.png)")
     a = ap.parse_args()
@@ -267,13 +282,26 @@ def main() -> None:
               f"{100 * off_share:.0f}% off the graph")
         print("   clients  paced  requests  req/s   p50 ms  p99 ms  max ms  server us p50/p99  errors")
         rows = []
+        gc.collect()
+        gc.freeze()  # the setup's objects (graph, bouts) out of the collector's passes while measuring
+        cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+        modes = (["pinned"] if len(cpus) >= 2 and not a.no_pin else []) + ["unpinned"]
         asyncio.run(round_trips(url, obs, 4, 1.0, None))  # warm-up
-        for clients, rate in ((1, a.rate), (10, a.rate), (100, a.rate), (100, None)):
-            r = asyncio.run(round_trips(url, obs, clients, a.seconds, rate))
-            rows.append(r)
-            print(f"   {clients:7d}  {('%g/s' % rate) if rate else 'no':>5s}  {r['requests']:8d}  "
-                  f"{r['throughput_per_s']:5.0f}  {r['p50_ms']:7.3f} {r['p99_ms']:7.3f} {r['max_ms']:7.2f}  "
-                  f"{r['server_decision_us_p50']:6.1f}/{r['server_decision_us_p99']:6.1f}  {r['errors']:6d}")
+        for mode in modes:
+            if mode == "pinned":
+                set_cpus(proc.pid, {cpus[0]})
+                set_cpus(0, {cpus[1]})
+            print(f"   {mode}" + (f": server on CPU {cpus[0]}, clients on CPU {cpus[1]}" if mode == "pinned" else ""))
+            for clients, rate in ((1, a.rate), (10, a.rate), (100, a.rate), (100, None)):
+                r = asyncio.run(round_trips(url, obs, clients, a.seconds, rate))
+                r["cpus"] = mode
+                rows.append(r)
+                print(f"   {clients:7d}  {('%g/s' % rate) if rate else 'no':>5s}  {r['requests']:8d}  "
+                      f"{r['throughput_per_s']:5.0f}  {r['p50_ms']:7.3f} {r['p99_ms']:7.3f} {r['max_ms']:7.2f}  "
+                      f"{r['server_decision_us_p50']:6.1f}/{r['server_decision_us_p99']:6.1f}  {r['errors']:6d}")
+            if mode == "pinned":
+                set_cpus(proc.pid, set(cpus))
+                set_cpus(0, set(cpus))
         results["round_trips"] = rows
         if not a.no_page:
             if not Path("/usr/bin/chromium").is_file():

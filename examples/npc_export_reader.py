@@ -23,7 +23,7 @@ import zlib
 import numpy as np
 
 FORMAT = "igraph-fight/npc-export"
-VERSION = 1
+VERSION = 2
 MAGIC = b"IGFNPCX1"
 
 
@@ -37,6 +37,9 @@ class NPCExport:
 
     def __init__(self, index: dict, sections: dict[str, np.ndarray]) -> None:
         self.index = index
+        g = float(index["grid_per_unit"])
+        for name in ("r", "theta_self", "theta_other"):  # integer codes of the lookup grid
+            sections[name] = sections[name].astype(np.float64) / g
         self.s = sections
         self.tables = {(t["style"], t["depth"]): t for t in index["tables"]}
         self.n_states = index["n_states"]
@@ -103,8 +106,11 @@ class NPCExport:
         """(state, level, off_graph, squared normalised distance): level 0 the compatible group
         (same key, |F_other difference| < f0), 1 the same key at any frame, 2 the same Next-set,
         3 anywhere; off_graph unless level 0 within the linking tolerance. (-1, 4, True, inf)
-        for an empty graph."""
+        for an empty graph. Distances and angles are compared on the file's grid (code /
+        grid_per_unit): the state values are stored so, the query is rounded half to even."""
         ix, s = self.index, self.s
+        g = float(ix["grid_per_unit"])  # the query on the lookup grid, as the controller rounds it
+        r, theta_self, theta_other = (float(np.rint(x * g) / g) for x in (r, theta_self, theta_other))
         ns = int(s["nextset_of"][m_self])
         key = (ns * ix["key_a1"] + m_other) * ix["mask_mod"] + mask_other
         keys = s["key_values"]

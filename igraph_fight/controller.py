@@ -70,7 +70,8 @@ from planner.rewards import style_params
 
 from igraph_fight.graph import InteractionGraph, load_graph
 from igraph_fight.locate import (
-    P_BST3, P_SCALARS, build_index, index_views, legal_row, locate_packed, nearest, nextset_ids, pack_index, part)
+    GRID_PER_UNIT, P_BST3, P_SCALARS, build_index, index_views, legal_row, locate_packed, nearest, nextset_ids,
+    pack_index, part)
 from igraph_fight.search import search
 from igraph_fight.sim import expand_one
 
@@ -606,8 +607,11 @@ class NPCController:
     def locate_params(self) -> dict:
         """What the nearest-state search computes with: f0, inv_sr2 = 1 / s_r^2, inv_st2 =
         1 / s_theta^2, the linking tolerances tol_r (m) and tol_theta (rad), and the state key's
-        factors key_a1 = A + 1 and mask_mod (key = (Next-set id * key_a1 + M_other) * mask_mod + mask)."""
-        return {"f0": self.f0, "inv_sr2": self._inv_sr2, "inv_st2": self._inv_st2, "tol_r": self.tol_r,
+        factors key_a1 = A + 1 and mask_mod (key = (Next-set id * key_a1 + M_other) * mask_mod + mask),
+        and grid_per_unit: distances and angles are compared rounded to multiples of its inverse
+        (igraph_fight.locate.on_grid)."""
+        return {"grid_per_unit": GRID_PER_UNIT, "f0": self.f0, "inv_sr2": self._inv_sr2, "inv_st2": self._inv_st2,
+                "tol_r": self.tol_r,
                 "tol_theta": self.tol_theta, "key_a1": int(self._key_args[0]), "mask_mod": int(self._key_args[1])}
 
     @property

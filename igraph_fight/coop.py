@@ -94,7 +94,8 @@ def midpoint_features(graph, tables, workers: int | None = 1) -> dict:
 def _coop_lookahead(T, pi, pf, pc, V_self, V_other, gamma, rw, menu, si, sf):
     """Off-graph cooperative decision: simulate every legal action once from the live state and
     score it by the cooperative reward of that event (planner.cooperative_rewards' formula) plus
-    gamma times the value of the graph state nearest to where it lands (V_other when the other
+    gamma times the value of the graph state nearest to where it lands (igraph_fight.locate, on
+    its lookup grid; V_other when the other
     fighter decides there). rw = (target_distance, w_theta, w_d, w_v, w_dmg, v_ref_x, v_ref_z) in
     the decider's pair frame, fps). Returns (best action, its score); (-1, -inf) without actions."""
     S = np.empty((2, 3))

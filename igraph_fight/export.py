@@ -2,9 +2,10 @@
 
     info = export_npc(graph, ["infighter", "outboxer", "balanced"], [1, 3, 5], "npc.bin")
 
-The file (docs/npc_export.md) holds the nearest-state index (every state's distance, angles,
-frame and key, in key order) and, per (style, depth), the action of each state's best edge; a
-reader that follows docs/npc_export.md (examples/npc_export_reader.py: numpy only) answers what
+The file (docs/npc_export.md) holds the nearest-state index (every state's distance and angles
+as integer codes of the controller's lookup grid, frame and key, in key order) and, per (style,
+depth), the action of each state's best edge; a reader that follows docs/npc_export.md
+(examples/npc_export_reader.py: numpy only) answers what
 ``NPCController(graph, style=S, depth=D, offgraph="nearest", first_ply="table")`` answers: the
 same action and the same graph state for every observation. Off the graph's Next-sets (a live
 Next(M_self) that no state has: the search's last level, anywhere) the best edge may be illegal
@@ -24,7 +25,7 @@ from motion_graph.atomic import atomic_write
 from igraph_fight import graph_compact as gc
 
 FORMAT = "igraph-fight/npc-export"
-VERSION = 1
+VERSION = 2
 MAGIC = b"IGFNPCX1"
 #: the action value meaning "none" in the best-action and fallback tables: answer the first
 #: action of the live Next(M_self)
@@ -36,6 +37,16 @@ def _seal(index: dict) -> str:
     body = {k: v for k, v in index.items() if k != "checksum"}
     return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
                                      allow_nan=False).encode()).hexdigest()
+
+
+def grid_codes(x: np.ndarray, order: np.ndarray, grid_per_unit: float) -> np.ndarray:
+    """``x[order]`` (m or rad) as integer codes of the lookup grid (igraph_fight.locate.on_grid:
+    value = code / grid_per_unit, exactly), in the smallest integer dtype that holds them."""
+    c = np.rint(np.asarray(x, dtype=np.float64)[order] * grid_per_unit)
+    if len(c) and not np.abs(c).max() < 2.0 ** 53:
+        raise ValueError("a state's distance or angle is too large for the lookup grid")
+    c = c.astype(np.int64)
+    return c.astype(gc.narrow_dtype(c))
 
 
 def fallback_actions(best_edge: np.ndarray, scores: np.ndarray, offsets: np.ndarray, edge_action: np.ndarray,
@@ -96,9 +107,9 @@ def export_npc(graph, styles: list[str], depths: list[int], out: str | os.PathLi
             "menu_ids": w.blob(menu_ids.astype(gc.narrow_dtype(menu_ids)), True),
             "key_values": w.blob(ukeys.astype(np.int64), True),
             "key_starts": w.blob(ustart.astype(gc.narrow_dtype(ustart)), True),
-            "r": w.blob(np.asarray(a["state_r"], np.float64)[order], True),
-            "theta_self": w.blob(np.asarray(a["state_theta_self"], np.float64)[order], True),
-            "theta_other": w.blob(np.asarray(a["state_theta_other"], np.float64)[order], True),
+            "r": w.blob(grid_codes(a["state_r"], order, lp["grid_per_unit"]), True),
+            "theta_self": w.blob(grid_codes(a["state_theta_self"], order, lp["grid_per_unit"]), True),
+            "theta_other": w.blob(grid_codes(a["state_theta_other"], order, lp["grid_per_unit"]), True),
             "f_other": w.blob(np.asarray(a["state_f_other"])[order].astype(gc.narrow_dtype(a["state_f_other"])), True),
             "state": w.blob(order.astype(gc.narrow_dtype(order)), True),
         }
@@ -128,6 +139,7 @@ def export_npc(graph, styles: list[str], depths: list[int], out: str | os.PathLi
             "graph_content_hash": g.header.get("content_hash") or g.content_hash,
             "library_fingerprint": g.library_fingerprint,
             "n_actions": A, "n_states": S, "n_keys": int(len(ukeys)),
+            "grid_per_unit": float(lp["grid_per_unit"]),
             "f0": int(lp["f0"]), "inv_sr2": float(lp["inv_sr2"]), "inv_st2": float(lp["inv_st2"]),
             "tol_r": float(lp["tol_r"]), "tol_theta": float(lp["tol_theta"]),
             "key_a1": int(lp["key_a1"]), "mask_mod": int(lp["mask_mod"]),

@@ -24,6 +24,25 @@ from numba import njit
 
 from motion_graph.rotations import wrap_angle_nb
 
+#: The lookup grid: the index holds every state's r (m) and angles (rad) rounded to multiples of
+#: 1 / GRID_PER_UNIT (0.12 mm, 0.007 deg) and rounds each query the same way before comparing, so
+#: every value compared is an integer times a power of two: exact in float64 and in 16-bit codes
+#: (an NPC export stores them so and answers bit for bit what the controller answers). The step is
+#: far below the graph's tolerances (the sampler merges states centimetres apart); a lookup answers
+#: what it would on the raw values except for a query within a grid step of a tie.
+GRID_PER_UNIT = 8192.0
+
+
+def on_grid(x) -> np.ndarray:
+    """``x`` (m or rad) rounded to the lookup grid (half to even), float64."""
+    return np.rint(np.asarray(x, dtype=np.float64) * GRID_PER_UNIT) / GRID_PER_UNIT
+
+
+@njit(cache=True, inline="always")
+def on_grid_nb(x):
+    """Scalar ``on_grid`` for the kernels."""
+    return np.rint(x * GRID_PER_UNIT) / GRID_PER_UNIT
+
 # ----- nearest-state index -------------------------------------------------------------------
 # The index (built by build_index), with key = (Next-set id * (A+1) + M_other) * mask_mod + mask
 # and kidx the rank of the key among the sorted ``ukeys``:
@@ -242,7 +261,10 @@ def nearest(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, nk
              f_other, f0, r, ts, to, inv_sr2, inv_st2):
     """Nearest state: compatible group first (same key, |F_other difference| < f0), then same
     key any frame, same menu, anywhere (see the index notes above). Returns (state, squared
-    normalised distance, level 0..3); (-1, inf, 4) for an empty graph."""
+    normalised distance, level 0..3) on the lookup grid; (-1, inf, 4) for an empty graph."""
+    r = on_grid_nb(r)
+    ts = on_grid_nb(ts)
+    to = on_grid_nb(to)
     best = -1
     bd = np.inf
     kidx = _lower(ukeys, key, 0, ukeys.shape[0])
@@ -340,7 +362,10 @@ def legal_row(pi, m):
 
 @njit(cache=True)
 def locate_packed(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask):
-    """(state, squared normalised distance, level, off_graph) of a live state."""
+    """(state, squared normalised distance, level, off_graph) of a live state (on the lookup grid)."""
+    r = on_grid_nb(r)
+    ts = on_grid_nb(ts)
+    to = on_grid_nb(to)
     rowsw, ctabw, rowsk, ctabk, xf, xi, strt = index_views(pi, pf, pc)
     sc = part(pi, P_SCALARS)
     nextset_of = part(pi, 3)
@@ -380,13 +405,14 @@ def _angle_bins(a: np.ndarray) -> np.ndarray:
 
 
 def build_index(a: dict, n_actions: int, mask_mod: int, f0: int, ncell: int = 8) -> tuple:
-    """The nearest-state index (notes above): returns (rowsw, ctabw, rowsk, ctabk, xf, xi, strt),
+    """The nearest-state index (notes above; values on the lookup grid): returns (rowsw, ctabw,
+    rowsk, ctabk, xf, xi, strt),
     the int parts (ukeys, nkeys, bst2, bst3, fm = number of frame blocks, ncell) and the cell
     width (m)."""
     S = len(a["state_r"])
-    r = np.ascontiguousarray(a["state_r"], dtype=np.float64)
-    ts = np.ascontiguousarray(a["state_theta_self"], dtype=np.float64)
-    to = np.ascontiguousarray(a["state_theta_other"], dtype=np.float64)
+    r = np.ascontiguousarray(on_grid(a["state_r"]))
+    ts = np.ascontiguousarray(on_grid(a["state_theta_self"]))
+    to = np.ascontiguousarray(on_grid(a["state_theta_other"]))
     f = a["state_f_other"].astype(np.int64)
     ns = a["state_nextset"].astype(np.int64)
     key = ((ns * (n_actions + 1) + a["state_m_other"].astype(np.int64)) * mask_mod

@@ -134,7 +134,7 @@ def search(T, nxt_off, nxt_ids, kinds, P, pref, fps, si, sf, depth, gamma, prune
     (``root_me``) or its opponent decides; an explicit stack (numba cannot cache recursive
     functions). The value function at the leaves (depth exhausted): 0 when ``V_me`` is empty (the
     plain game tree, V(., 0) = 0), else the value of the Interaction Graph state nearest to the
-    leaf's landing sample (igraph_fight.locate; ``V_me`` where the controlled fighter decides
+    leaf's landing sample (igraph_fight.locate, on its lookup grid; ``V_me`` where the controlled fighter decides
     there, else ``V_opp``), so that
 
         Q(a) = W(a) + gamma * opt_b [W(b) + gamma * V(nearest(landing(a, b)))]

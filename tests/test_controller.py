@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from igraph_fight.controller import NPCController, Observation
-from igraph_fight.locate import nextset_ids
+from igraph_fight.locate import GRID_PER_UNIT, nextset_ids, on_grid
 from planner import roulette_probabilities
 
 
@@ -82,9 +82,9 @@ def _brute_nearest(c: NPCController, o: Observation) -> tuple[int, float, int]:
     ties to the smallest state id (anywhere: the first in key order)."""
     a = c.graph.arrays
     ns = nextset_ids(c.library)[o.m_self]
-    d = ((a["state_r"] - o.r) ** 2 * c._inv_sr2
-         + (_wrap(a["state_theta_self"] - o.theta_self) ** 2 + _wrap(a["state_theta_other"] - o.theta_other) ** 2)
-         * c._inv_st2)
+    r, ts, to = on_grid(a["state_r"]), on_grid(a["state_theta_self"]), on_grid(a["state_theta_other"])
+    d = ((r - on_grid(o.r)) ** 2 * c._inv_sr2
+         + (_wrap(ts - on_grid(o.theta_self)) ** 2 + _wrap(to - on_grid(o.theta_other)) ** 2) * c._inv_st2)
     key = (a["state_nextset"] == ns) & (a["state_m_other"] == o.m_other) & (a["state_mask_other"] == o.mask_other)
     levels = [key & (np.abs(a["state_f_other"].astype(np.int64) - o.f_other) < c.f0), key, a["state_nextset"] == ns]
     for lv, sel in enumerate(levels):
@@ -109,6 +109,22 @@ def test_nearest_state_is_the_exact_minimum_at_every_level(ctrl, graph_lib):
         assert s == bs, (o, s, bs, dist, np.sqrt(bd), lv)
         assert dist == pytest.approx(np.sqrt(bd), abs=1e-12)
     assert levels[0] > 100 and levels[1] + levels[2] > 20  # the fallbacks were exercised
+
+
+def test_lookup_compares_on_the_grid(ctrl, graph_lib):
+    """Queries within half a grid step of the same grid point get the same state and the same
+    distance, bit for bit (the NPC export relies on it); a full step apart, the distance moves."""
+    g, lib = graph_lib
+    h = 0.49 / GRID_PER_UNIT
+    for o in _observations(g, lib, 100, seed=7):
+        o = o._replace(r=float(on_grid(o.r + 0.3)), theta_self=float(on_grid(o.theta_self)),
+                       theta_other=float(on_grid(o.theta_other)))
+        ref = ctrl.locate(o)
+        for dr, dts, dto in ((h, 0, 0), (-h, h, -h), (0, -h, h)):
+            assert ctrl.locate(o._replace(r=o.r + dr, theta_self=o.theta_self + dts,
+                                          theta_other=o.theta_other + dto)) == ref
+        moved = ctrl.locate(o._replace(r=o.r + 1.0 / GRID_PER_UNIT))
+        assert moved[0] != ref[0] or moved[1] != ref[1]
 
 
 def test_act_returns_legal_actions(ctrl, nearest, graph_lib):
@@ -172,9 +188,10 @@ def test_off_graph_flag(ctrl, graph_lib):
     for o in _observations(g, lib, 300, seed=5):
         d = ctrl.act(o)
         bs, _, lv = _brute_nearest(ctrl, o)
-        beyond = (abs(a["state_r"][bs] - o.r) > ctrl.tol_r
-                  or abs(_wrap(a["state_theta_self"][bs] - o.theta_self)) > ctrl.tol_theta
-                  or abs(_wrap(a["state_theta_other"][bs] - o.theta_other)) > ctrl.tol_theta)
+        g_r, g_ts, g_to = (on_grid(x) for x in (o.r, o.theta_self, o.theta_other))
+        beyond = (abs(on_grid(a["state_r"][bs]) - g_r) > ctrl.tol_r
+                  or abs(_wrap(on_grid(a["state_theta_self"][bs]) - g_ts)) > ctrl.tol_theta
+                  or abs(_wrap(on_grid(a["state_theta_other"][bs]) - g_to)) > ctrl.tol_theta)
         assert d.off_graph == (lv > 0 or beyond), (o, d, lv)
 
 

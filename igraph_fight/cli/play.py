@@ -68,6 +68,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         print(f"igraph-fight: error: {e}", file=sys.stderr)
         return 2
 
+    import gc
+    gc.collect()
+    gc.freeze()  # what loading made (graph, library, tables) stays out of the collector's passes while serving
+
     def ready(url: str) -> None:
         print(f"igraph-fight play: open {url} in a browser (NPC service: {url.replace('http', 'ws')}ws, "
               f"POST {url}decide; Ctrl-C stops)", flush=True)

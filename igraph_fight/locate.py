@@ -28,8 +28,8 @@ from motion_graph.rotations import wrap_angle_nb
 #: 1 / GRID_PER_UNIT (0.12 mm, 0.007 deg) and rounds each query the same way before comparing, so
 #: every value compared is an integer times a power of two: exact in float64 and in 16-bit codes
 #: (an NPC export stores them so and answers bit for bit what the controller answers). The step is
-#: far below the graph's tolerances (the sampler merges states centimetres apart); a lookup answers
-#: what it would on the raw values except for a query within a grid step of a tie.
+#: far below the graph's linking tolerances (0.1 m and 20 degrees by default); a lookup answers what
+#: it would on the raw values except for a query within a grid step of a tie.
 GRID_PER_UNIT = 8192.0
 
 

@@ -448,3 +448,35 @@ def test_covers_is_the_existence_of_a_state_within_tolerance(built):
         assert not within or cov
         agree += int(within == cov)
     assert 0 < agree <= 300
+
+
+def test_edge_columns_on_disk_give_the_same_graph(lib, built, tmp_path):
+    """With a checkpoint folder the edges' columns are memory-mapped files under edges/ (filled
+    block by block); the graph is the in-memory build's, array for array."""
+    ckpt = tmp_path / "ckpt"
+    g, _ = build_graph(lib, SMALL, seed=0, checkpoint_dir=ckpt, keep_checkpoint=True)
+    files = sorted(p.name for p in (ckpt / "edges").iterdir())
+    assert "feat_r" not in files and "r.f8" in files and "target.i8" in files and "swap.i1" in files
+    E = g.n_edges
+    assert (ckpt / "edges" / "r.f8").stat().st_size >= 8 * E > 0
+    want = built[0].arrays
+    for k in ("edge_target", "edge_action", "edge_swap", "feat_r", "feat_theta_self", "feat_dmg_given",
+              "edge_snap_r", "state_offsets"):
+        np.testing.assert_array_equal(g.arrays[k], want[k])
+    assert g.content_hash == built[0].content_hash
+
+
+def test_column_store_fills_in_place_and_hands_back_read_only(tmp_path):
+    from igraph_fight.build.columns import ColumnStore
+    for folder in (None, tmp_path / "cols"):
+        st = ColumnStore(folder)
+        a = st.new("x", 5, np.float64)
+        b = st.new("n", 0, np.int64)
+        a[:2], a[2:] = [1.0, 2.0], [3.0, 4.0, 5.0]
+        with pytest.raises(ValueError, match="allocated twice"):
+            st.new("x", 1, np.float64)
+        out = st.finish()
+        np.testing.assert_array_equal(out["x"], [1, 2, 3, 4, 5])
+        assert len(out["n"]) == 0 and not out["x"].flags.writeable
+        if folder is not None:
+            assert isinstance(out["x"], np.memmap) and (folder / "x.f8").stat().st_size == 40

@@ -26,7 +26,8 @@ Memory per Ray worker: the simulator tables (the action library, a few MB) plus,
 sampler runs, a replica of the archive index (4 int64 keys, 3 float64 features, a chain link and
 two to four hash slots: 96-128 bytes per sample), and while edges are linked, the state index
 (the same per state) plus one shard's landings and features; the driver holds the archive and
-the edge set it returns (docs/scaling.md).
+the edge set it returns, whose columns it fills block by block in place (columns.py; memory-mapped
+files in a checkpoint folder: docs/scaling.md).
 """
 from __future__ import annotations
 
@@ -72,7 +73,8 @@ class Backend(Protocol):
                         on_block: Callable[[int], None] | None = None) -> list[tuple]: ...
 
     def link_features(self, blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-                      on_block: Callable[[int], None] | None = None) -> list[dict]: ...
+                      sink: Callable[[int, dict], None]) -> None:
+        """Each block's feature columns handed to ``sink(k, columns)`` in block order, as they come."""
 
     def link_stop(self) -> None: ...
 
@@ -136,14 +138,11 @@ class LocalBackend:
                 on_block(len(out) - 1)
         return out
 
-    def link_features(self, blocks, on_block=None) -> list:
-        out = []
-        for src, action, tgt in blocks:
+    def link_features(self, blocks, sink) -> None:
+        for k, (src, action, tgt) in enumerate(blocks):
             with self.clock("link_features"):
-                out.append(self.worker.link_features(src, action, tgt))
-            if on_block is not None:
-                on_block(len(out) - 1)
-        return out
+                cols = self.worker.link_features(src, action, tgt)
+            sink(k, cols)
 
     def link_stop(self) -> None:
         self.worker.link_release()

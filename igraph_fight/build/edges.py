@@ -15,6 +15,7 @@ identical simulation pass (to keep memory small).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,7 @@ from numba import njit
 
 from igraph_fight import sim
 from igraph_fight.build import spatial
+from igraph_fight.build.columns import ColumnStore
 from igraph_fight.build.explore import point_rows
 from igraph_fight.sim import SF_R, SI_MSELF, SimTables
 
@@ -175,13 +177,15 @@ def edge_features(T: tuple, st_si: np.ndarray, st_sf: np.ndarray, src: np.ndarra
 def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r: float, tol_theta: float,
          max_distance_m: float, prune: bool = True, s_r: float = 0.5, s_theta: float = np.pi / 6,
          max_candidates: int = 8, block: int = 20_000, progress: bool = False, workers: int = 1,
-         backend=None) -> Edges:
+         backend=None, spill_dir: str | os.PathLike | None = None) -> Edges:
     """Simulate every (state, menu action), link within (tol_r m, tol_theta rad), prune dead ends.
 
     Each landing keeps its ``max_candidates`` nearest states within tolerance (nearest first): it
     links to the first that survives pruning. Two passes keep memory small: the first keeps only
     the candidates, the second re-simulates the landings that keep an edge (deterministic, hence
-    identical) for their features, in blocks of states. The simulations run on ``backend``
+    identical) for their features, in blocks of states, each block written into columns allocated
+    once at the final edge count (igraph_fight.build.columns; files mapped into memory under
+    ``spill_dir`` when given, else arrays). The simulations run on ``backend``
     (igraph_fight.build.backend; None: this process on ``workers`` threads); pruning runs here.
     """
     S = len(st_si)
@@ -232,8 +236,7 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
     dead_before = float(np.mean(linked_cum[loff[1:]] - linked_cum[loff[:-1]] == 0)) if S and L else 1.0
     alive, cascaded = _prune(S, loff, off, cand, prune)
     # second pass, in blocks of states: landings of surviving states with a surviving candidate
-    out = {k: [] for k in ("src", "action", "target", "swap", *FEATURE_COLUMNS, "snap_r", "snap_theta")}
-    blocks = []
+    picked = []
     for b, e in spans:
         rows = np.arange(loff[b], loff[e])
         src = np.repeat(np.arange(b, e, dtype=np.int64), np.diff(loff[b:e + 1]))
@@ -242,30 +245,41 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
         tgt = _first_alive(off, cand, alive, rows)
         keep = tgt >= 0
         rows, src, tgt = rows[keep], src[keep], tgt[keep]
-        action = tables.next_ids[no[m[src]] + rows - loff[src]]
-        out["src"].append(src)
-        out["action"].append(action)
-        out["target"].append(tgt)
-        blocks.append((src, action, tgt))
+        picked.append((src, tables.next_ids[no[m[src]] + rows - loff[src]], tgt))
+    del cand, off, counts
+    starts = np.concatenate([[0], np.cumsum([len(p[0]) for p in picked])]).astype(np.int64)
+    E = int(starts[-1])
+    store = ColumnStore(spill_dir)
+    ids = [store.new(name, E, np.int64) for name in ("src", "action", "target")]
+    blocks = []
+    for k, p in enumerate(picked):
+        lo, hi = starts[k], starts[k + 1]
+        for col, x in zip(ids, p):
+            col[lo:hi] = x
+        blocks.append(tuple(np.asarray(col[lo:hi]) for col in ids))
+    del picked
+    swap = store.new("swap", E, np.int8)
+    feat = {name: store.new(name, E, np.float64) for name in (*FEATURE_COLUMNS, "snap_r", "snap_theta")}
+
+    def sink(k: int, cols: dict) -> None:
+        lo, hi = starts[k], starts[k + 1]
+        swap[lo:hi] = cols["swap"]
+        for name, col in feat.items():
+            col[lo:hi] = cols[name]
+        tick(k)
+
     if backend is None:
-        feats = []
         for k, (src, action, tgt) in enumerate(blocks):
-            feats.append(edge_features(T, st_si, st_sf, src, action, tgt, workers))
-            tick(k)
+            sink(k, edge_features(T, st_si, st_sf, src, action, tgt, workers))
     else:
-        feats = backend.link_features(blocks, on_block=tick)
-    for cols in feats:
-        for k in ("swap", *FEATURE_COLUMNS, "snap_r", "snap_theta"):
-            out[k].append(cols[k])
-    del blocks, feats
-    if backend is not None:
+        backend.link_features(blocks, sink)
         backend.link_stop()
+    del blocks, ids, swap, feat
     if bar is not None:
         bar.close()
-    cat = {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in out.items()}
+    cat = store.finish()
     stats = {"landings": L, "landings_linked_before_pruning": linked_before,
              "dead_end_fraction_before_pruning": dead_before, "pruned_by_cascade": int(cascaded),
              "out_of_arena_fraction": float(n_out / L) if L else 0.0}
     cols = {k: cat[k] for k in (*FEATURE_COLUMNS, "snap_r", "snap_theta")}
-    return Edges(cat["src"].astype(np.int64), cat["action"].astype(np.int64), cat["target"].astype(np.int64),
-                 cat["swap"].astype(np.int8), cols, alive, stats)
+    return Edges(cat["src"], cat["action"], cat["target"], cat["swap"], cols, alive, stats)

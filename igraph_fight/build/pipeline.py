@@ -168,7 +168,9 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
             local Ray is started); the same graph and content hash either way.
         checkpoint_dir: folder for the sampler checkpoint (``archive.npz``); a build with the same
             library, options and seed resumes from it; one with other inputs raises ValueError.
-            Removed after success (after ``out`` is in place) unless ``keep_checkpoint``.
+            The edges' columns are memory-mapped files under its ``edges/`` while the graph is
+            linked and written (igraph_fight.build.columns). Removed after success (after ``out``
+            is in place) unless ``keep_checkpoint``.
         progress: progress bars on stderr.
         on_chunk: called after each sampler checkpoint (chunks done, samples).
         out: write the graph file here (InteractionGraph.save) before the checkpoint is removed.
@@ -223,7 +225,8 @@ def build_graph(library, options: BuildOptions = BuildOptions(), seed: int = 0, 
         t = time.perf_counter()
         ed = edges.link(tables, cl.si, cl.sf, options.f0, options.link_tol_r_m, options.link_tol_theta_rad,
                         options.max_distance_m, options.prune_dead_ends, options.s_r_m, options.s_theta_rad,
-                        options.max_candidates, progress=progress, workers=workers, backend=runner)
+                        options.max_candidates, progress=progress, workers=workers, backend=runner,
+                        spill_dir=Path(checkpoint_dir) / "edges" if checkpoint_dir is not None else None)
         timings["edges_s"] = time.perf_counter() - t
         backend_report = runner.report()
     finally:

@@ -131,8 +131,14 @@ class RayBackend:
         return self._blocks("link_candidates", [(lambda a, b=b: a.link_candidates.remote(b[0], b[1], max_distance_m, tol_r, tol_theta,
                                                                        max_candidates)) for b in blocks], on_block)
 
-    def link_features(self, blocks, on_block=None) -> list:
-        return self._blocks("link_features", [(lambda a, b=b: a.link_features.remote(b[0], b[1], b[2])) for b in blocks], on_block)
+    def link_features(self, blocks, sink) -> None:
+        calls = [(lambda a, b=b: a.link_features.remote(b[0], b[1], b[2])) for b in blocks]
+        with self.clock("link_features"):
+            refs = [self._call(k, call) for k, call in enumerate(calls)]
+            for k in range(len(refs)):
+                cols = self.ray.get(refs[k])
+                refs[k] = None  # the driver's copy of the answer goes once the sink has it
+                sink(k, cols)
 
     def _blocks(self, name: str, calls: list[Callable], on_block: Callable[[int], None] | None) -> list:
         """Each block to the actors in turn, answers taken in block order."""

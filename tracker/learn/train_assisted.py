@@ -9,6 +9,10 @@ Read top to bottom:
    tracker.track.grounding); episodes start at a random frame (reference-state initialisation, with
    joint-velocity noise), end at a fall or when the joint error passes ``et_mpjpe_m`` (terminated),
    and are cut at ``max_episode_steps`` or the walk's end (the value is bootstrapped there).
+   Optional pushes stand in for the opponent's contacts, which the walks lack: with probability
+   ``push_prob`` per control step a slot not already pushed gets a horizontal force of
+   ``push_force_mg`` body weights (uniform in the range, any direction) on one upper-body body
+   (above the pelvis at rest: chest, neck, head, arms) for ``push_steps`` control steps.
 3. The policy: a Gaussian over PD-target residuals (rad) and the assist wrench (cap units, facing
    frame); the wrench's mean starts at the fixed PD's (an observation: a learned gain per component
    on it, plus the network's output), so the first episodes already stand; reward = the env's
@@ -74,6 +78,9 @@ class AssistedTrainConfig:
     curriculum_window: int = 200
     curriculum_completion: float = 0.95
     ckpt_every_min: float = 10.0
+    push_prob: float = 0.0
+    push_force_mg: tuple = (0.1, 0.4)
+    push_steps: tuple = (2, 4)
 
     @classmethod
     def from_dict(cls, d: dict) -> "AssistedTrainConfig":
@@ -162,9 +169,33 @@ class Rollouts:
         self.ep_return = np.zeros(cfg.n_envs)
         self.ep_assist = np.zeros(cfg.n_envs)
         self.finished: list[dict] = []
+        self.push_bodies = upper_bodies(self.env)
+        self.push_left = np.zeros(cfg.n_envs, dtype=np.int64)
+        self.push_body = np.zeros(cfg.n_envs, dtype=np.int64)
+        self.pushes = 0
         for b in range(cfg.n_envs):
             self._start(b)
         self.obs = self.env.observe()
+
+    def push(self) -> None:
+        """Start, hold or end the pushes before a control step (module docstring, item 2)."""
+        c = self.cfg
+        if c.push_prob <= 0.0 or len(self.push_bodies) == 0:
+            return
+        for b in range(c.n_envs):
+            d = self.env.datas[b]
+            if self.push_left[b] > 0:
+                self.push_left[b] -= 1
+                if self.push_left[b] == 0:
+                    d.xfrc_applied[self.push_body[b], :3] = 0.0
+            elif self.rng.random() < c.push_prob:
+                body = int(self.push_bodies[self.rng.integers(len(self.push_bodies))])
+                mag = float(self.rng.uniform(*c.push_force_mg)) * float(self.env.mass[b]) * 9.81
+                ang = float(self.rng.uniform(-np.pi, np.pi))
+                d.xfrc_applied[body, :3] = (mag * np.cos(ang), mag * np.sin(ang), 0.0)
+                self.push_body[b] = body
+                self.push_left[b] = int(self.rng.integers(c.push_steps[0], c.push_steps[1] + 1))
+                self.pushes += 1
 
     def _new_ref(self):
         from tracker.track.evaluation import walk_reference
@@ -181,12 +212,28 @@ class Rollouts:
         self.env.config = replace(self.env.config, assist=replace(self.env.config.assist, cap=self.cap))
 
     def _start(self, b: int) -> None:
+        if self.push_left[b] > 0:
+            self.env.datas[b].xfrc_applied[self.push_body[b], :3] = 0.0
+            self.push_left[b] = 0
         ref = self.pool[int(self.rng.integers(len(self.pool)))]
         s = int(self.rng.integers(0, max(1, ref.n_frames - 31)))
         self.env.reset([b], [ref], [s], self.rng)
         self.steps[b] = 0
         self.ep_return[b] = 0.0
         self.ep_assist[b] = 0.0
+
+
+def upper_bodies(env) -> np.ndarray:
+    """Body ids of the single fighter's upper body: more than 0.15 m above its pelvis in the model's
+    rest pose (the bodies an opponent's punches and arms meet)."""
+    import mujoco
+    if env.F != 1:
+        raise ValueError("pushes need a one-fighter scene")
+    d = mujoco.MjData(env.model)
+    mujoco.mj_kinematics(env.model, d)
+    pel = env.layouts[0].pelvis
+    ids = [b for b in range(1, env.model.nbody) if d.xpos[b, 2] > d.xpos[pel, 2] + 0.15]
+    return np.asarray(ids, dtype=np.int64)
 
 
 def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConfig(), library: str | None = None,
@@ -283,6 +330,7 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
             an = a.numpy().astype(np.float64)
             targets = env.reference_targets() + np.clip(an[:, :env.n_act], -cfg.residual_clip, cfg.residual_clip)
             assist = np.clip(an[:, env.n_act:], -1.0, 1.0)
+            roll.push()
             obs2, rew, done, info = env.step(targets, assist)
             roll.steps += 1
             roll.ep_return += rew
@@ -368,7 +416,7 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
                "completion": float(np.mean(recent)) if recent else 0.0,
                "episode_steps": float(np.mean([f["steps"] for f in fin])) if fin else float("nan"),
                "assist_mg": float(np.mean([f["assist_mg"] for f in fin])) if fin else float("nan"),
-               "cap": float(roll.cap), "kl": kl, "lr": float(opt.param_groups[0]["lr"]),
+               "cap": float(roll.cap), "pushes": int(roll.pushes), "kl": kl, "lr": float(opt.param_groups[0]["lr"]),
                "std": float(actor.log_std.detach().exp().mean()),
                "steps_per_s": float(n / max(time.perf_counter() - wall0 - elapsed, 1e-9))}
         curve.append(row)

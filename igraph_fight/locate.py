@@ -262,9 +262,14 @@ def nearest(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, nk
     """Nearest state: compatible group first (same key, |F_other difference| < f0), then same
     key any frame, same menu, anywhere (see the index notes above). Returns (state, squared
     normalised distance, level 0..3) on the lookup grid; (-1, inf, 4) for an empty graph."""
-    r = on_grid_nb(r)
-    ts = on_grid_nb(ts)
-    to = on_grid_nb(to)
+    return _nearest_on_grid(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, nkeys, bst2, bst3,
+                            key, nextset, f_other, f0, on_grid_nb(r), on_grid_nb(ts), on_grid_nb(to), inv_sr2, inv_st2)
+
+
+@njit(cache=True)
+def _nearest_on_grid(rowsw, ctabw, rowsk, ctabk, ukeys, nblock, ncell, cell_w, xf, xi, nkeys, bst2, bst3, key,
+                     nextset, f_other, f0, r, ts, to, inv_sr2, inv_st2):
+    """``nearest`` for a query already on the lookup grid."""
     best = -1
     bd = np.inf
     kidx = _lower(ukeys, key, 0, ukeys.shape[0])
@@ -372,8 +377,9 @@ def locate_packed(pi, pf, pc, r, ts, to, m_self, m_other, f_other, mask):
     key_args = part(pi, 4)
     ns = nextset_of[m_self]
     key = (ns * key_args[0] + m_other) * key_args[1] + mask
-    s, d2, level = nearest(rowsw, ctabw, rowsk, ctabk, part(pi, 0), sc[1], sc[2], pf[4], xf, xi, part(pi, 1),
-                            part(pi, 2), part(pi, P_BST3), key, ns, f_other, sc[0], r, ts, to, pf[0], pf[1])
+    s, d2, level = _nearest_on_grid(rowsw, ctabw, rowsk, ctabk, part(pi, 0), sc[1], sc[2], pf[4], xf, xi,
+                                     part(pi, 1), part(pi, 2), part(pi, P_BST3), key, ns, f_other, sc[0], r, ts, to,
+                                     pf[0], pf[1])
     off = level > 0
     if s >= 0 and level == 0:
         off = (abs(strt[s, 0] - r) > pf[2] or abs(wrap_angle_nb(strt[s, 1] - ts)) > pf[3]

@@ -6,7 +6,10 @@ removed: ``G_target = G_source @ A``, where the rest alignment A takes the targe
 segment (the direction from the joint to the next body part) onto the source's by the shortest arc
 in the body's rest frame (left, up, forward from the hip line), so both segments point the same way
 in the world in every frame. Target joints without a partner keep the identity local rotation (they follow
-their parent). The pelvis path is scaled by the leg-length ratio (hip to ankle, rest pose), the
+their parent). Joints the target's own take never moves (held joints: the CMU hip joints and
+clavicles of subject 13, which its ASF gives no degrees of freedom) keep that take's rotation, and
+their children keep their world rotations, so every library on the target body animates the same
+joints as the target performer and its physics body has the same actuators. The pelvis path is scaled by the leg-length ratio (hip to ankle, rest pose), the
 frame rate resampled to the target's, and a per-frame vertical shift of the root keeps the feet on
 the floor: the lowest sole point's clearance above the floor (measured against the foot's
 flat-footed rest geometry) equals the source's, scaled by the leg ratio.
@@ -43,6 +46,9 @@ _SEGMENT_TO: dict[str, tuple[str, ...]] = {
 }
 #: Shorter rest vectors than this (metres) do not define a direction.
 _MIN_SEGMENT_M = 1e-3
+#: A joint is held when every frame of the target's take gives it this same local rotation
+#: (largest component difference of the unit quaternions, sign-aligned).
+HELD_ATOL = 1e-9
 #: Floor height estimate: this percentile of the lowest sole point over the clip (as features.py).
 _FLOOR_PERCENTILE = 3.0
 
@@ -56,22 +62,44 @@ class RetargetTarget:
         fps: target frame rate, frames per second.
         part_overrides: joint-map override for the target (``{"part": "JointName"}``), or None.
         source: where the skeleton came from (file path), for provenance.
+        held: (joint index, (x, y, z, w) local rotation) of every joint the target's take never
+            moves (end sites and the root excluded); retargeted takes keep them at that rotation.
     """
 
     skeleton: Skeleton
     fps: float
     part_overrides: dict | None = None
     source: str = ""
+    held: tuple[tuple[int, tuple[float, float, float, float]], ...] = ()
 
     @classmethod
     def from_motion(cls, motion: Motion, part_overrides: dict | None = None) -> "RetargetTarget":
-        """The skeleton and frame rate of a loaded take."""
-        return cls(motion.skeleton, float(motion.fps), part_overrides, motion.source)
+        """The skeleton, frame rate and held joints of a loaded take."""
+        return cls(motion.skeleton, float(motion.fps), part_overrides, motion.source, held_joints(motion))
+
+    @property
+    def held_names(self) -> tuple[str, ...]:
+        """Names of the held joints."""
+        return tuple(self.skeleton.names[j] for j, _ in self.held)
+
+
+def held_joints(motion: Motion) -> tuple[tuple[int, tuple[float, float, float, float]], ...]:
+    """(joint, local rotation) of every joint (root and end sites excluded) with the same local
+    rotation in every frame of ``motion`` (within HELD_ATOL)."""
+    q = np.asarray(motion.rotations, dtype=float)
+    if q.shape[0] == 0:
+        return ()
+    sk = motion.skeleton
+    q0 = q[0]
+    sign = np.where(np.sum(q * q0[None], axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+    still = (np.abs(q * sign - q0[None]).max(axis=0) <= HELD_ATOL).all(axis=-1)
+    return tuple((j, tuple(float(v) for v in q0[j])) for j in range(1, sk.n_joints)
+                 if still[j] and not sk.is_end_site[j] and sk.parents[j] >= 0)
 
 
 def load_target(path: str | os.PathLike, part_overrides: dict | None = None,
                 fps: float | None = None) -> RetargetTarget:
-    """The target body of a mocap file (.bvh, or .amc with its .asf): its skeleton and frame rate."""
+    """The target body of a mocap file (.bvh, or .amc with its .asf): its skeleton, frame rate and held joints."""
     return RetargetTarget.from_motion(load_motion(path, fps=fps), part_overrides)
 
 
@@ -281,8 +309,8 @@ def retarget(motion: Motion, target: RetargetTarget | Skeleton, plan: RetargetMa
         plan: a precomputed plan_retarget(source skeleton, target skeleton), reused across takes.
         source_overrides: joint-map override for the source skeleton.
     Returns:
-        A Motion of the target skeleton (no animated local translations), ``source`` kept. The
-        floor sits where the source's does, scaled by the leg ratio (retargeting onto the same
+        A Motion of the target skeleton (no animated local translations), ``source`` kept; the
+        target's held joints keep their rotation (their children their world rotations). The floor sits where the source's does, scaled by the leg ratio (retargeting onto the same
         skeleton returns the same joint positions).
     Raises:
         ValueError: essential parts missing in either skeleton (named in the message).
@@ -296,9 +324,12 @@ def retarget(motion: Motion, target: RetargetTarget | Skeleton, plan: RetargetMa
     Gs, Ps = m.global_transforms()
     T, J = m.n_frames, sk.n_joints
     G = np.empty((T, J, 3, 3))
+    held = {j: quat_to_matrix(np.asarray(q, dtype=float)) for j, q in tgt.held}
     for j in range(J):
         s, p = int(plan.source_joint[j]), int(sk.parents[j])
-        if s >= 0 and not sk.is_end_site[j]:
+        if j in held and p >= 0:
+            G[:, j] = G[:, p] @ held[j]
+        elif s >= 0 and not sk.is_end_site[j]:
             G[:, j] = Gs[:, s] @ plan.align[j]
         elif p >= 0:
             G[:, j] = G[:, p]
@@ -352,7 +383,8 @@ def segment_retargeted(files: list[str | os.PathLike], params=None,
         progress: show a progress bar.
         fps_override: override the source files' frame rate.
     Returns:
-        (ClipResult per take, the target, per-take report {path: {"leg_scale", "unmatched", "fps"}}).
+        (ClipResult per take, the target, per-take report {path: {"leg_scale", "unmatched", "held",
+        "fps"}}; "held": the target's held joints, whose motion in the take its children carry).
     """
     from motion_graph.library import LibraryParams
 
@@ -375,12 +407,13 @@ def segment_retargeted(files: list[str | os.PathLike], params=None,
         if tgt is None:
             tgt = RetargetTarget.from_motion(m, params.part_overrides)
         if same_body(m, tgt):
-            mt, scale, unmatched = m, 1.0, []
+            mt, scale, unmatched, held = m, 1.0, [], []
         else:
             plan = plan_retarget(m.skeleton, tgt.skeleton, None, tgt.part_overrides, str(f), tgt.source or "target")
             mt = retarget(m, tgt, plan)
-            scale, unmatched = plan.leg_scale, list(plan.unmatched)
-        report[str(f)] = {"leg_scale": round(float(scale), 6), "unmatched": unmatched, "fps": float(m.fps)}
+            scale, unmatched, held = plan.leg_scale, list(plan.unmatched), list(tgt.held_names)
+        report[str(f)] = {"leg_scale": round(float(scale), 6), "unmatched": unmatched, "held": held,
+                          "fps": float(m.fps)}
         clips.append(segment_motion(mt, f, params))
         del m
     return clips, tgt, report

@@ -113,6 +113,34 @@ def test_unmatched_joint_keeps_identity(boxer):
     assert np.abs(out.positions()[:, :sk.n_joints] - boxer.positions()).max() < TOL_M
 
 
+def test_held_joint_keeps_the_targets_rotation_and_its_children_their_world_rotation(boxer):
+    """A joint the target's take never moves (here the neck; CMU 13 holds its clavicles and hip
+    joints) stays at that rotation in every retargeted take; the head keeps its world rotation."""
+    sk = boxer.skeleton
+    clav, arm = sk.index("Neck"), sk.index("Head")
+    def wobble(axis: int, amp: float) -> np.ndarray:
+        q = np.zeros((boxer.n_frames, 4))
+        q[:, axis] = amp * np.sin(np.linspace(0, 6, boxer.n_frames))
+        q[:, 3] = 1.0
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+    moving = boxer.rotations.copy()
+    moving[:, clav], moving[:, arm] = wobble(0, 0.1), wobble(1, 0.2)
+    source = Motion(sk, moving, boxer.root_positions, boxer.fps, None, "moving.bvh")
+    still = np.broadcast_to([0.0, 0.0, np.sin(0.05), np.cos(0.05)], (boxer.n_frames, 4))
+    held_rot = boxer.rotations.copy()
+    held_rot[:, clav], held_rot[:, arm] = still, wobble(1, 0.3)
+    target = RetargetTarget.from_motion(Motion(sk, held_rot, boxer.root_positions, boxer.fps, None, "target.bvh"))
+    assert "Neck" in target.held_names and "Head" not in target.held_names
+    out = retarget(source, target)
+    np.testing.assert_allclose(np.abs(out.rotations[:, clav]), np.abs(still), atol=1e-12)
+    free = retarget(source, RetargetTarget(sk, boxer.fps))  # nothing held
+    G_out, _ = out.global_transforms()
+    G_free, _ = free.global_transforms()
+    np.testing.assert_allclose(G_out[:, arm], G_free[:, arm], atol=1e-9)
+    assert not np.allclose(G_out[:, clav], G_free[:, clav], atol=1e-3)
+
+
 def test_missing_essential_parts_are_named(boxer):
     sk = boxer.skeleton
     no_elbow = _with(sk, names=["Blob" if n == "LeftForeArm" else n for n in sk.names])
@@ -171,6 +199,15 @@ def test_library_of_two_performers_on_one_body(take_14_02, boxing_files):
     assert lib.graph_report()["largest_scc_fraction"] >= 0.9
     takes = lib.meta["retarget"]["takes"]
     assert takes[str(boxing_files[0])]["leg_scale"] == 1.0 and takes[take_14_02.source]["leg_scale"] > 1.0
+    # the joints 13 never moves (hip joints, clavicles) stay still, so the physics body is 13's own
+    held = takes[take_14_02.source]["held"]
+    assert {"LHipJoint", "RHipJoint", "LeftShoulder", "RightShoulder"} <= set(held)
+    from motion_graph.io import load_motion
+    from tracker.body.spec import fighter_spec
+    own = fighter_spec(lib.skeleton, [load_motion(f) for f in boxing_files])
+    mixed = fighter_spec(lib.skeleton, [Motion(lib.skeleton, lib.rotations, lib.root_positions, lib.fps,
+                                               lib.local_translations, "library")])
+    assert np.array_equal(own.dof, mixed.dof)
 
 
 @pytest.mark.realdata

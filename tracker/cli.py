@@ -100,6 +100,22 @@ def register(subparsers) -> None:
     ta.add_argument("--no-progress", action="store_true", help="no progress bar")
     ta.set_defaults(func=cmd_train_assisted)
 
+    tb = sub.add_parser("train-assisted-bouts", help="continue the assisted tracker inside physics bouts (PPO, one core)",
+                        description="Continue an assisted-tracker checkpoint (default: the shipped one) inside "
+                                    "physics bouts between planner fighters: the opponent, the planner's sequences "
+                                    "and their placement are in the episodes, a fall ends a fighter's episode. "
+                                    "Assisted physics at the checkpoint's cap. Writes a checkpoint of the same "
+                                    "format (resumable by either route) and a learning-curve PNG next to it.")
+    tb.add_argument("--graph", required=True, help="interaction graph file the planner fighters use")
+    tb.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
+    tb.add_argument("--out", required=True, help="checkpoint to write (.pt), atomically, every few minutes and at the end")
+    tb.add_argument("--resume", help="checkpoint to continue (default: tracker/checkpoints/assisted_cmu13.pt)")
+    tb.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="override a BoutTrainConfig field (styles, depth, bout_seconds, seed0, noise_seed) or an "
+                         "AssistedTrainConfig field (PPO: lr, epochs, ...); repeatable")
+    tb.add_argument("--no-progress", action="store_true", help="no progress bar")
+    tb.set_defaults(func=cmd_train_assisted_bouts)
+
     gr = sub.add_parser("ground", help="the grounded reference: foot float and penetration before and after grounding",
                         description="Build the protocol's walk references and report the lower foot's height "
                                     "(as captured on the model, then grounded by tracker.track.grounding), the share "
@@ -337,6 +353,32 @@ def cmd_train_assisted(args) -> int:
     b = r["budget"]
     print(f"wrote {r['out']} (and {r['out']}.png): {b['samples'] / 1e6:.2f}M samples, {b['cpu_s'] / 3600:.2f} CPU-hours "
           f"over {b['runs']} run(s), assist cap now {r['cap']:.3f} mg")
+    return 0
+
+
+def cmd_train_assisted_bouts(args) -> int:
+    from dataclasses import fields
+    from tracker.learn.overrides import parse_config_overrides
+    from tracker.learn.train_assisted import AssistedTrainConfig
+    from tracker.learn.train_assisted_bouts import BoutTrainConfig, train_in_bouts
+    name = "igraph-fight tracker train-assisted-bouts"
+    if not args.minutes > 0:
+        print(f"{name}: --minutes must be positive", file=sys.stderr)
+        return 2
+    bout_keys = {f.name for f in fields(BoutTrainConfig)}
+    items = args.set or []
+    try:
+        bout_over = parse_config_overrides([i for i in items if i.partition("=")[0] in bout_keys], BoutTrainConfig)
+        ppo_over = parse_config_overrides([i for i in items if i.partition("=")[0] not in bout_keys],
+                                          AssistedTrainConfig)
+        r = train_in_bouts(args.out, args.minutes, args.graph, resume=args.resume,
+                           bout_cfg=BoutTrainConfig(**bout_over), overrides=ppo_over, progress=not args.no_progress)
+    except ValueError as e:
+        print(f"{name}: {e}", file=sys.stderr)
+        return 2
+    b = r["budget"]
+    print(f"wrote {r['out']} (and {r['out']}.png): {r['bouts']} bouts, {b['samples'] / 1e6:.2f}M samples in all, "
+          f"{b['cpu_s'] / 3600:.2f} CPU-hours over {b['runs']} run(s); assisted physics, cap {r['cap']:.3f} mg")
     return 0
 
 

@@ -184,6 +184,7 @@ class PhysicsBout:
         self._prev_v = [None, None]
         self._gap = 0.0
         self._pending = sorted(self.schedule, key=lambda x: x[0])
+        self.step_reward, self.step_info = None, None
         # initial coupled state: the kinematic game's random start (both at a guard's last frame)
         st = initial if initial is not None else self.setup.game.new_initial_state(rng)
         w0: WorldState = st.world
@@ -204,6 +205,11 @@ class PhysicsBout:
             env.set_root_assist(True)
         self._trace = {"t": [], "pose": [], "action": [], "frame": [], "distance": [], "qpos": [], "down": []}
         self._record(self._trace)
+
+    @property
+    def observation(self) -> np.ndarray:
+        """The tracker's observation of both fighters for the next control step."""
+        return self._obs
 
     def step(self, before_physics: Callable[["PhysicsBout"], None] | None = None) -> None:
         """One control step: scheduled callbacks, tracking controller, physics (contacts judged),
@@ -240,7 +246,8 @@ class PhysicsBout:
         # than ``hook_gap_m`` in one control step)
         env.substep_hook = self.judge.substep if self._gap < self.hook_gap_m else None
         n_hits = len(self.hit_events)
-        obs, _, _, info = env.step(act, assist) if self.setup.batched else env.step(act)
+        obs, rew, _, info = env.step(act, assist) if self.setup.batched else env.step(act)
+        self.step_reward, self.step_info = rew, info   # what a trainer in bouts reads
         t = env.t
         self._after_step(t, info)
         if self.setup.batched:

@@ -92,7 +92,8 @@ class AssistedTrainConfig:
         return cls(**kw)
 
 
-def _torch_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):
+def assisted_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):
+    """The actor (Gaussian over residuals and wrench, the fixed PD's wrench as its prior) and the critic."""
     import torch
     from torch import nn
 
@@ -262,7 +263,7 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     roll = Rollouts(cfg, lib, cfg.seed * 1000 + (prior["budget"]["runs"] if prior else 0))
     env = roll.env
     obs_dim, act_dim = roll.obs.shape[1], env.n_act + N_ASSIST
-    actor, critic = _torch_nets(obs_dim, act_dim, cfg)
+    actor, critic = assisted_nets(obs_dim, act_dim, cfg)
     opt = torch.optim.Adam(list(actor.parameters()) + list(critic.parameters()), lr=cfg.lr)
     norm = RunningNorm(obs_dim)
     budget = {"samples": 0, "cpu_s": 0.0, "wall_s": 0.0, "runs": 0, "iterations": 0}
@@ -295,8 +296,9 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
         budget["wall_s"] = wall_base + time.perf_counter() - wall0
         ck = {"actor": actor.state_dict(), "critic": critic.state_dict(),
               "optimizer": opt.state_dict(), "obs_mean": norm.mean, "obs_var": norm.var,
-              "obs_count": float(norm.count), "config": _plain(asdict(cfg)), "cap": float(roll.cap),
+              "obs_count": float(norm.count), "config": plain_config(asdict(cfg)), "cap": float(roll.cap),
               "budget": dict(budget), "curve": curve, "completions": completions[-cfg.curriculum_window:],
+              "bout_curve": list(prior.get("bout_curve", [])) if prior else [],
               "torch_version": torch.__version__}
         save_checkpoint(out, ck, FORMAT, VERSION)
         plot_curve(curve, str(out) + ".png")
@@ -361,43 +363,8 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
         adv, ret = gae(R, V, NV, C, cfg.gamma, cfg.lam)
         # ---- PPO update ---------------------------------------------------------------------
         n = T * N
-        X = torch.from_numpy(O.reshape(n, obs_dim))
-        XF = torch.from_numpy(FX.reshape(n, N_ASSIST))
-        Aa = torch.from_numpy(A.reshape(n, act_dim))
-        LPo = torch.from_numpy(LP.reshape(n))
-        ADV = torch.from_numpy(adv.reshape(n).astype(np.float32))
-        RET = torch.from_numpy(ret.reshape(n).astype(np.float32))
-        g = torch.Generator().manual_seed(cfg.seed * 100_003 + budget["iterations"])
-        kl = 0.0
-        for ep in range(cfg.epochs):
-            perm = torch.randperm(n, generator=g)
-            for s in range(0, n, cfg.minibatch):
-                idx = perm[s:s + cfg.minibatch]
-                mu, log_std = actor(X[idx], XF[idx])
-                std = log_std.exp()
-                lp = (-0.5 * ((Aa[idx] - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
-                ratio = torch.exp(lp - LPo[idx])
-                pi_loss = clipped_policy_loss(ratio, normalise(ADV[idx]), cfg.clip)
-                v_loss = 0.5 * ((critic(X[idx]).squeeze(-1) - RET[idx]) ** 2).mean()
-                opt.zero_grad()
-                (pi_loss + cfg.vf_coef * v_loss).backward()
-                torch.nn.utils.clip_grad_norm_(list(actor.parameters()) + list(critic.parameters()), cfg.max_grad_norm)
-                opt.step()
-                with torch.no_grad():
-                    actor.log_std.clamp_(min=cfg.min_log_std)
-            with torch.no_grad():
-                mu, log_std = actor(X, XF)
-                lp = (-0.5 * ((Aa - mu) / log_std.exp()) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
-                logr = lp - LPo
-                kl = float((logr.exp() - 1.0 - logr).mean())
-            if kl > 2.0 * cfg.target_kl:
-                break
-        # adaptive step: the KL of the update sets the next learning rate (within [lr_min, lr])
-        lr = opt.param_groups[0]["lr"]
-        lr = max(cfg.lr_min, lr / 1.5) if kl > 2.0 * cfg.target_kl else min(cfg.lr, lr * 1.5) \
-            if kl < 0.5 * cfg.target_kl else lr
-        for gr in opt.param_groups:
-            gr["lr"] = lr
+        kl = ppo_update(actor, critic, opt, O.reshape(n, obs_dim), FX.reshape(n, N_ASSIST), A.reshape(n, act_dim),
+                        LP.reshape(n), adv.reshape(n), ret.reshape(n), cfg, cfg.seed * 100_003 + budget["iterations"])
         norm.update(RAW.reshape(-1, obs_dim))     # after the update: the batch used the old statistics
         # ---- curriculum, bookkeeping ----------------------------------------------------------
         budget["samples"] += n
@@ -436,12 +403,59 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     return {"out": str(out), "budget": budget, "cap": roll.cap, "last": curve[-1] if curve else {}}
 
 
-def _plain(d):
+
+def ppo_update(actor, critic, opt, O: np.ndarray, FX: np.ndarray, A: np.ndarray, LP: np.ndarray, adv: np.ndarray,
+               ret: np.ndarray, cfg: AssistedTrainConfig, seed: int) -> float:
+    """PPO epochs over one batch (normalised observations O, raw fixed-PD wrenches FX, actions A,
+    their log-probabilities LP, advantages and returns; all (n, ...)) with early stop at twice
+    ``target_kl``, then the adaptive step: the update's KL sets the next learning rate within
+    [lr_min, lr]. Returns the KL."""
+    import torch
+    n = O.shape[0]
+    X = torch.from_numpy(np.ascontiguousarray(O, dtype=np.float32))
+    XF = torch.from_numpy(np.ascontiguousarray(FX, dtype=np.float32))
+    Aa = torch.from_numpy(np.ascontiguousarray(A, dtype=np.float32))
+    LPo = torch.from_numpy(np.ascontiguousarray(LP, dtype=np.float32))
+    ADV = torch.from_numpy(np.ascontiguousarray(adv, dtype=np.float32))
+    RET = torch.from_numpy(np.ascontiguousarray(ret, dtype=np.float32))
+    g = torch.Generator().manual_seed(seed)
+    kl = 0.0
+    for ep in range(cfg.epochs):
+        perm = torch.randperm(n, generator=g)
+        for s in range(0, n, cfg.minibatch):
+            idx = perm[s:s + cfg.minibatch]
+            mu, log_std = actor(X[idx], XF[idx])
+            std = log_std.exp()
+            lp = (-0.5 * ((Aa[idx] - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+            ratio = torch.exp(lp - LPo[idx])
+            pi_loss = clipped_policy_loss(ratio, normalise(ADV[idx]), cfg.clip)
+            v_loss = 0.5 * ((critic(X[idx]).squeeze(-1) - RET[idx]) ** 2).mean()
+            opt.zero_grad()
+            (pi_loss + cfg.vf_coef * v_loss).backward()
+            torch.nn.utils.clip_grad_norm_(list(actor.parameters()) + list(critic.parameters()), cfg.max_grad_norm)
+            opt.step()
+            with torch.no_grad():
+                actor.log_std.clamp_(min=cfg.min_log_std)
+        with torch.no_grad():
+            mu, log_std = actor(X, XF)
+            lp = (-0.5 * ((Aa - mu) / log_std.exp()) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+            logr = lp - LPo
+            kl = float((logr.exp() - 1.0 - logr).mean())
+        if kl > 2.0 * cfg.target_kl:
+            break
+    lr = opt.param_groups[0]["lr"]
+    lr = max(cfg.lr_min, lr / 1.5) if kl > 2.0 * cfg.target_kl else min(cfg.lr, lr * 1.5) \
+        if kl < 0.5 * cfg.target_kl else lr
+    for gr in opt.param_groups:
+        gr["lr"] = lr
+    return kl
+
+def plain_config(d):
     """Config values as plain lists / numbers (what torch.load(weights_only=True) reads back)."""
     if isinstance(d, dict):
-        return {k: _plain(v) for k, v in d.items()}
+        return {k: plain_config(v) for k, v in d.items()}
     if isinstance(d, (list, tuple)):
-        return [_plain(x) for x in d]
+        return [plain_config(x) for x in d]
     return d
 
 

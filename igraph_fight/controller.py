@@ -72,8 +72,14 @@ from igraph_fight.graph import InteractionGraph, load_graph
 from igraph_fight.locate import (
     GRID_PER_UNIT, P_BST3, P_SCALARS, build_index, index_views, legal_row, locate_packed, nearest, nextset_ids,
     pack_index, part)
+from igraph_fight import locate, search as search_module, sim
+from igraph_fight.kernel_cache import drop_stale_caches
 from igraph_fight.search import search
 from igraph_fight.sim import expand_one
+import motion_graph.rotations
+import planner.rewards
+
+drop_stale_caches(__file__, [locate, search_module, sim, planner.rewards, motion_graph.rotations])
 
 
 #: NPCController's first_ply choices (see the module docstring)

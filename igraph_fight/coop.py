@@ -28,9 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from igraph_fight import sim
+import motion_graph.rotations
+from igraph_fight import locate, sim
+from igraph_fight.kernel_cache import drop_stale_caches
 from igraph_fight.locate import locate_packed
 from igraph_fight.sim import advance_to_decision, expand_one, root_pose, sample_world
+
+drop_stale_caches(__file__, [locate, sim, motion_graph.rotations])
 
 
 @njit(cache=True, inline="always")

@@ -21,10 +21,11 @@ DEMO_SEED_BOUTS = 256
 
 def run_demo(mocap: str | None = None, out: str | Path = "out/demo", seed: int = 0, progress: bool = True,
              seconds: float = 60.0, swap_at_s: float = 30.0, max_samples: int = DEMO_MAX_SAMPLES) -> dict:
-    """Segment the CMU boxing takes, build a small Interaction Graph, and play infighter (A) vs
+    """Segment the shared boxing takes (on one body), build a small Interaction Graph, and play infighter (A) vs
     outboxer (B) where A switches to outboxer at ``swap_at_s``; write every artifact."""
-    from motion_graph.library import LibraryParams, library_from_clips, segment_files
+    from motion_graph.library import LibraryParams
     from motion_graph.plot import plot_timelines
+    from motion_graph.retarget import retargeted_library_and_clips
 
     from igraph_fight.style_bout import run_style_bout
     from igraph_fight.build.pipeline import BuildOptions, build_graph
@@ -36,8 +37,7 @@ def run_demo(mocap: str | None = None, out: str | Path = "out/demo", seed: int =
     timings: dict[str, float] = {}
     files = boxing_files(mocap)
     params = LibraryParams()
-    clips = segment_files(files, params, progress=progress)
-    lib = library_from_clips(clips, params)
+    lib, clips = retargeted_library_and_clips(files, params, progress=progress)
     lib.save(out / "library.npz")
     plot_timelines([{
         "name": Path(c.path).name, "fps": c.motion.fps, "contacts": c.segmentation.contacts,

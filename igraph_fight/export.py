@@ -23,6 +23,7 @@ import numpy as np
 from motion_graph.atomic import atomic_write
 
 from igraph_fight import graph_compact as gc
+from igraph_fight.locate import grid_code
 
 FORMAT = "igraph-fight/npc-export"
 VERSION = 2
@@ -42,7 +43,7 @@ def _seal(index: dict) -> str:
 def grid_codes(x: np.ndarray, order: np.ndarray, grid_per_unit: float) -> np.ndarray:
     """``x[order]`` (m or rad) as integer codes of the lookup grid (igraph_fight.locate.on_grid:
     value = code / grid_per_unit, exactly), in the smallest integer dtype that holds them."""
-    c = np.rint(np.asarray(x, dtype=np.float64)[order] * grid_per_unit)
+    c = grid_code(np.asarray(x, dtype=np.float64)[order], grid_per_unit)
     if len(c) and not np.abs(c).max() < 2.0 ** 53:
         raise ValueError("a state's distance or angle is too large for the lookup grid")
     c = c.astype(np.int64)

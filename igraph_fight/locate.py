@@ -22,7 +22,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+import motion_graph.rotations
+from igraph_fight.kernel_cache import drop_stale_caches
 from motion_graph.rotations import wrap_angle_nb
+
+drop_stale_caches(__file__, [motion_graph.rotations])
 
 #: The lookup grid: the index holds every state's r (m) and angles (rad) rounded to multiples of
 #: 1 / GRID_PER_UNIT (0.12 mm, 0.007 deg) and rounds each query the same way before comparing, so
@@ -33,9 +37,15 @@ from motion_graph.rotations import wrap_angle_nb
 GRID_PER_UNIT = 8192.0
 
 
+def grid_code(x, grid_per_unit: float = GRID_PER_UNIT) -> np.ndarray:
+    """``x`` (m or rad) as its lookup-grid code: the nearest multiple of 1 / ``grid_per_unit``
+    (half to even) times ``grid_per_unit``, an integer-valued float64."""
+    return np.rint(np.asarray(x, dtype=np.float64) * grid_per_unit)
+
+
 def on_grid(x) -> np.ndarray:
     """``x`` (m or rad) rounded to the lookup grid (half to even), float64."""
-    return np.rint(np.asarray(x, dtype=np.float64) * GRID_PER_UNIT) / GRID_PER_UNIT
+    return grid_code(x) / GRID_PER_UNIT
 
 
 @njit(cache=True, inline="always")

@@ -26,10 +26,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from igraph_fight import sim
+import motion_graph.rotations
+import planner.rewards
+from igraph_fight import locate, sim
+from igraph_fight.kernel_cache import drop_stale_caches
 from igraph_fight.locate import locate_packed
 from igraph_fight.sim import N_FEAT, N_SF, N_SI
 from planner.rewards import fight_edge
+
+drop_stale_caches(__file__, [locate, sim, planner.rewards, motion_graph.rotations])
 
 INF = 1e300
 #: values closer than this are a tie at the root (first best in menu order wins)

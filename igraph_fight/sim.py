@@ -45,7 +45,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+import motion_graph.rotations
+from igraph_fight.kernel_cache import drop_stale_caches
 from motion_graph.rotations import wrap_angle_nb
+
+drop_stale_caches(__file__, [motion_graph.rotations])
 
 # Per-event statistics, avatar slots 0 and 1 (ST_* index into the stats vector).
 ST_FRAMES = 0     # frames advanced

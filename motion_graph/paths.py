@@ -37,14 +37,21 @@ def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
 
 
 def boxing_takes(root: Path) -> list[Path]:
-    """The CMU subject-13 boxing takes under a mocap root (BVH in cmu/boxing, else AMC anywhere)."""
+    """The shared boxing takes under a mocap root, in library order: CMU subject 13's 13_17 and
+    13_18 (BVH in cmu/boxing, else AMC anywhere), then subject 14's 14_02 where present (BVH or
+    AMC anywhere; another skeleton, retargeted onto 13_17's body by default_boxing_library)."""
+    takes: list[Path] = []
     for sub in ("cmu/boxing", "."):
-        d = root / sub
-        bvh = sorted(d.glob("13_1[78].bvh"))
+        bvh = sorted((root / sub).glob("13_1[78].bvh"))
         if bvh:
-            return bvh
-    amc = sorted(root.rglob("13_1[78].amc"))
-    return amc
+            takes = bvh
+            break
+    if not takes:
+        takes = sorted(root.rglob("13_1[78].amc"))
+    if not takes:
+        return []
+    extra = sorted(root.rglob("14_02.bvh")) or sorted(root.rglob("14_02.amc"))
+    return takes + extra[:1]
 
 
 def boxing_files(mocap: str | os.PathLike | None) -> list[Path]:
@@ -59,5 +66,5 @@ def boxing_files(mocap: str | os.PathLike | None) -> list[Path]:
                                f"or run `igraph-fight data fetch-cmu`")
     files = boxing_takes(root)
     if not files:
-        raise MocapFormatError(str(root), "no CMU boxing takes (13_17, 13_18) in this folder")
+        raise MocapFormatError(str(root), "no CMU boxing takes (13_17, 13_18; 14_02 optional) in this folder")
     return files

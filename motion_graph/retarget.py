@@ -24,9 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from motion_graph.classify import annotate
 from motion_graph.errors import MocapFormatError, shorten
-from motion_graph.features import clip_features, foot_points
+from motion_graph.features import foot_points
 from motion_graph.io import find_mocap_files, load_motion
 from motion_graph.motion import Motion, forward_kinematics
 from motion_graph.rotations import matrix_to_quat, quat_to_matrix
@@ -426,8 +425,17 @@ def build_retargeted_library(files: list[str | os.PathLike], params=None,
     """An ActionLibrary of takes of several skeletons on one body (see segment_retargeted).
 
     The library's skeleton is the target's; ``meta["retarget"]`` records the target file and, per
-    take, the leg scale and the target joints left at the identity.
+    take, the leg scale and the target joints left at the identity. Takes on the target's own
+    body pass unchanged, so takes of one skeleton give the plain library.
     """
+    return retargeted_library_and_clips(files, params, target, labels_file, progress, fps_override)[0]
+
+
+def retargeted_library_and_clips(files: list[str | os.PathLike], params=None,
+                                 target: RetargetTarget | str | os.PathLike | None = None,
+                                 labels_file: str | os.PathLike | None = None, progress: bool = False,
+                                 fps_override: float | None = None) -> tuple:
+    """build_retargeted_library, also returning the segmented clips (for timelines and reports)."""
     from motion_graph.library import LibraryParams, library_from_clips
 
     params = params or LibraryParams()
@@ -435,7 +443,14 @@ def build_retargeted_library(files: list[str | os.PathLike], params=None,
     lib = library_from_clips(clips, params, labels_file)
     lib.meta["retarget"] = {"target": str(Path(tgt.source)) if tgt.source else "", "target_fps": tgt.fps,
                             "takes": report}
-    return lib
+    return lib, clips
+
+
+def default_boxing_library(mocap: str | os.PathLike | None = None, params=None, progress: bool = False):
+    """The default action library: the shared boxing takes (motion_graph.paths.boxing_takes: 13_17,
+    13_18 and, where present, 14_02) on 13_17's body. A MocapFormatError says where to get them."""
+    from motion_graph.paths import boxing_files
+    return build_retargeted_library(boxing_files(mocap), params, progress=progress)
 
 
 # ----- contact sheet ----------------------------------------------------------------------

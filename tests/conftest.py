@@ -77,11 +77,34 @@ def boxing_library(boxing_files):
 
 
 @pytest.fixture(scope="session")
+def default_library(boxing_files, mocap_root):
+    """The default action library: the shared boxing takes 13_17, 13_18 and 14_02 on 13_17's body
+    (motion_graph.retarget.default_boxing_library, about 10 s); the shipped physics checkpoints
+    that pick library actions are trained on it."""
+    from motion_graph.retarget import default_boxing_library
+    if not (mocap_root / "cmu" / "bvh_hahne" / "14_02.bvh").is_file():
+        pytest.skip("CMU 14_02 missing")
+    return default_boxing_library(mocap_root)
+
+
+@pytest.fixture(scope="session")
 def tiny_graph_file(boxing_library, tmp_path_factory) -> Path:
     """A tiny Interaction Graph of the boxing library (3000 samples, a few seconds), saved with
     its library embedded."""
     from igraph_fight.build.pipeline import BuildOptions, build_graph
     graph, _ = build_graph(boxing_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64, seed_bouts=0), seed=0)
     path = tmp_path_factory.mktemp("tiny_graph") / "tiny.igz"
+    graph.save(path)
+    return path
+
+
+@pytest.fixture(scope="session")
+def tiny_default_graph_file(default_library, tmp_path_factory) -> Path:
+    """tiny_graph_file's options on the default library (13_17 + 13_18 + 14_02): the graph the
+    shipped physics RL baseline and hit model fit."""
+    from igraph_fight.build.pipeline import BuildOptions, build_graph
+    graph, _ = build_graph(default_library, BuildOptions(max_samples=3000, n_initial=16, chunk_parents=64, seed_bouts=0),
+                           seed=0)
+    path = tmp_path_factory.mktemp("tiny_default_graph") / "tiny3.igz"
     graph.save(path)
     return path

@@ -158,26 +158,26 @@ def test_menu_terms_score_is_the_lookahead_and_the_agent_uses_the_odds(tiny_grap
 
 
 @pytest.mark.realdata
-def test_collect_train_and_play_a_physics_bout(tiny_graph_file, tmp_path):
+def test_collect_train_and_play_a_physics_bout(tiny_default_graph_file, tmp_path):
     from tracker.learn.train_hit_model import collect
     from tracker.bouts.hit_model import load_hit_model
     from tracker.bouts.rl_eval import evaluate_vs_rl
     out = tmp_path / "hits.npz"
-    r = collect(str(tiny_graph_file), 2, out, seconds=2.0, seed0=5, workers=1, tracker="pd")
+    r = collect(str(tiny_default_graph_file), 2, out, seconds=2.0, seed0=5, workers=1, tracker="pd")
     d = load_data(out)
     from motion_graph.classify import KINDS
-    assert r["samples"] == len(d["X"]) > 0 and d["X"].shape[1] == 68 + 14 + 4 + len(KINDS) + 14
+    assert r["samples"] == len(d["X"]) > 0 and d["X"].shape[1] == 119 + 14 + 4 + len(KINDS) + 14
     assert set(np.unique(d["seed"])) <= {5, 6} and d["y"].shape == (len(d["X"]), 3)
     assert (d["rl"] == 1).any() and (d["rl"] == 0).any()       # seed 6: IG vs the RL baseline, both recorded
     model, _ = train(d, HitModelConfig(epochs=2, holdout=0.0), log=lambda s: None)
     model.save(tmp_path / "hm.pt")
     back = load_hit_model(tmp_path / "hm.pt")
     assert np.allclose(back.predict(d["X"][:3]), model.predict(d["X"][:3]))
-    res = evaluate_vs_rl(str(tiny_graph_file), None, ["outboxer"], n_bouts=1, seconds=1.0, depth=2, tracker="pd",
+    res = evaluate_vs_rl(str(tiny_default_graph_file), None, ["outboxer"], n_bouts=1, seconds=1.0, depth=2, tracker="pd",
                          log=lambda s: None, hit_model=str(tmp_path / "hm.pt"), future="kinematic")
     assert res["hit_model"] == str(tmp_path / "hm.pt") and res["styles"]["outboxer"]["bouts"][0]["decisions_a"] >= 1
     with pytest.raises(ValueError, match="no held-out report"):      # calibration needs the held-out rates
-        evaluate_vs_rl(str(tiny_graph_file), None, ["outboxer"], n_bouts=1, seconds=1.0, depth=2, tracker="pd",
+        evaluate_vs_rl(str(tiny_default_graph_file), None, ["outboxer"], n_bouts=1, seconds=1.0, depth=2, tracker="pd",
                        log=lambda s: None, hit_model=str(tmp_path / "hm.pt"), future="calibrated")
     with pytest.raises(ValueError, match="hm_bad.pt"):
         (tmp_path / "hm_bad.pt").write_bytes(b"junk")
@@ -185,12 +185,13 @@ def test_collect_train_and_play_a_physics_bout(tiny_graph_file, tmp_path):
 
 
 @pytest.mark.realdata
-def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(boxing_library, tiny_graph_file):
+def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(default_library, tiny_default_graph_file,
+                                                                                  tiny_graph_file, boxing_library):
     from planner import load_style
     from tracker.bouts.loaders import make_agent
     from tracker.bouts.hit_model import calibrated_style, load_hit_model
     m = load_hit_model()
-    assert m.meta["n_actions"] == boxing_library.n_actions
+    assert m.meta["n_actions"] == default_library.n_actions
     # the documented data (docs/tracker.md): 720 bouts of 60 s in four rounds, 20% of them held out
     assert m.meta["samples"] > 75_000 and len(m.meta["held_out_seeds"]) == 144
     rep = m.meta["report"]
@@ -199,14 +200,14 @@ def test_shipped_hit_model_beats_the_kinematic_prediction_on_its_held_out_bouts(
         assert rep[head]["log_loss"] < rep[head]["log_loss_base_rate"]
         assert 0.05 < rep[head]["rate_when_kinematic_predicts"] < 0.5
     assert calibrated_style(load_style("infighter"), m).w_dmg_given < load_style("infighter").w_dmg_given
-    agent = make_agent("infighter+phys", str(tiny_graph_file), boxing_library, 2)   # the shipped model by default
+    agent = make_agent("infighter+phys", str(tiny_default_graph_file), default_library, 2)   # the shipped model by default
     assert agent.future == "calibrated" and agent.name == "infighter(2, phys)"
     assert agent.controller.style == "infighter~phys"          # the table of calibrated_style
     agent.set_style("outboxer")                                # a run-time swap keeps the calibration
     assert agent.style.name == "outboxer" and agent.controller.style == "outboxer~phys"
     agent.controller.close()
     from tracker.bouts.hit_model import phys_fighter
-    pf = phys_fighter(str(tiny_graph_file), boxing_library, "infighter", 2, m, future="physical")
+    pf = phys_fighter(str(tiny_default_graph_file), default_library, "infighter", 2, m, future="physical")
     g = pf.controller.graph.arrays
     strike = np.isin(g["feat_kind"], [0, 1]) & (g["feat_dmg_given"] == 0)    # jabs / straights the simulator says miss
     assert strike.any() and (pf.controller._arrays["feat_dmg_given"][strike] > 0).all()

@@ -190,9 +190,24 @@ def test_14_02_onto_13_keeps_contacts_and_reach(take_14_02, boxing_files):
     assert abs(n_dst - len(punches)) <= 0.1 * len(punches)
 
 
+def test_default_takes_are_13s_two_then_14_02_where_present(tmp_path):
+    from motion_graph.paths import boxing_takes
+    (tmp_path / "cmu" / "boxing").mkdir(parents=True)
+    (tmp_path / "cmu" / "hahne").mkdir()
+    for name in ("cmu/boxing/13_18.bvh", "cmu/boxing/13_17.bvh"):
+        (tmp_path / name).write_text("")
+    assert [p.name for p in boxing_takes(tmp_path)] == ["13_17.bvh", "13_18.bvh"]
+    (tmp_path / "cmu" / "hahne" / "14_02.bvh").write_text("")
+    assert [p.name for p in boxing_takes(tmp_path)] == ["13_17.bvh", "13_18.bvh", "14_02.bvh"]
+    assert boxing_takes(tmp_path / "cmu" / "hahne") == []       # 14_02 alone is not the default library
+
+
 @pytest.mark.realdata
-def test_library_of_two_performers_on_one_body(take_14_02, boxing_files):
-    lib = build_retargeted_library([*boxing_files, take_14_02.source])
+def test_library_of_two_performers_on_one_body(take_14_02, boxing_files, mocap_root):
+    from motion_graph.retarget import default_boxing_library
+    lib = default_boxing_library(mocap_root)
+    again = build_retargeted_library([*boxing_files, take_14_02.source])
+    assert lib.n_actions == again.n_actions and np.array_equal(lib.rotations, again.rotations)
     assert lib.skeleton.names == load_target(boxing_files[0]).skeleton.names
     assert lib.n_actions >= 110 and len(lib.label_counts()) >= 10
     assert {p.split("/")[-1] for p in lib.sources} == {"13_17.bvh", "13_18.bvh", "14_02.bvh"}
@@ -224,3 +239,19 @@ def test_segment_cli_target_skeleton(take_14_02, boxing_files, tmp_path, capsys)
     lib = load_library(out)
     assert lib.n_actions == summary["n_actions"] and lib.skeleton.offsets.tolist() == \
         take_14_02.skeleton.offsets.tolist()
+
+
+@pytest.mark.realdata
+def test_build_cli_retargets_takes_of_two_skeletons(take_14_02, boxing_files, tmp_path, capsys):
+    from igraph_fight.cli import main
+    from igraph_fight.graph import load_graph
+    out = tmp_path / "g.igz"
+    small = ["--max-samples", "2000", "--n-initial", "16", "--seed-bouts", "0", "--json"]
+    assert main(["build", "--mocap", str(boxing_files[1]), take_14_02.source, "--out", str(out), *small]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    lib = load_graph(out).load_library()
+    assert rep["n_states"] > 0 and lib.skeleton.names == load_target(boxing_files[1]).skeleton.names
+    assert {p.split("/")[-1] for p in lib.sources} == {"13_18.bvh", "14_02.bvh"}
+    assert main(["build", "--library", str(tmp_path / "x.npz"), "--target-skeleton", take_14_02.source,
+                 "--out", str(out)]) == 2
+    assert "--target-skeleton applies to mocap takes" in capsys.readouterr().err

@@ -33,7 +33,7 @@ def register(subparsers) -> None:
     sub.required = True
 
     def source_args(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+        q.add_argument("--library", help="action library file (default: the shared boxing takes 13_17, 13_18, 14_02 on one body)")
         q.add_argument("--mocap", help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
         q.add_argument("--clips", nargs="+", help="track windows of these clips instead of library walks")
         q.add_argument("--controller", default="pd", help="pd (default), balance (PD + virtual-force balance, "
@@ -90,7 +90,7 @@ def register(subparsers) -> None:
                                     "library that outputs PD-target residuals and a bounded balance wrench, the cap "
                                     "lowered while the running completion stays high. Writes a resumable checkpoint "
                                     "and a learning-curve PNG next to it.")
-    ta.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+    ta.add_argument("--library", help="action library file (default: the shared boxing takes 13_17, 13_18, 14_02 on one body)")
     ta.add_argument("--minutes", type=float, required=True, help="wall-clock minutes to train (this run)")
     ta.add_argument("--out", required=True, help="checkpoint to write (.pt), atomically, every few minutes and at the end")
     ta.add_argument("--resume", help="continue from this checkpoint (its config, optimiser, curriculum and budget)")
@@ -140,7 +140,7 @@ def register(subparsers) -> None:
 
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
     """Arguments of `tracker train` (here, not in tracker.learn.train_tracker, so the CLI starts without torch)."""
-    p.add_argument("--library", help="action library file (default: build from the CMU boxing takes)")
+    p.add_argument("--library", help="action library file (default: the shared boxing takes 13_17, 13_18, 14_02 on one body)")
     p.add_argument("--minutes", type=positive_float, required=True, help="wall-clock minutes to train (this run)")
     p.add_argument("--out", required=True, help="checkpoint to write (.pt); a learning-curve .png goes next to it, and for "
                    "search runs the label buffer (CKPT.labels.npz, reloaded by --resume)")

@@ -37,9 +37,11 @@ def register(sub) -> None:
                        description="Build an Interaction Graph. The sampler's archive is checkpointed to "
                                    "OUT.ckpt/ after every chunk, and removed only once OUT is written: rerunning "
                                    "an interrupted command (killed at any point) resumes it and gives the same graph.")
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--mocap", nargs="+", metavar="DIR_OR_FILE", help="mocap folder(s) or .bvh/.amc files")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--mocap", nargs="+", metavar="DIR_OR_FILE", help="mocap folder(s) or .bvh/.amc files, of one or several skeletons (retargeted onto the first take's body; default: the shared boxing takes 13_17, 13_18 and 14_02)")
     src.add_argument("--library", metavar="LIB", help="a saved action library (.npz) instead of --mocap")
+    p.add_argument("--target-skeleton", default=None, metavar="FILE",
+                   help="with --mocap: the mocap file whose skeleton is the library's body (default: the first take's)")
     p.add_argument("--out", required=True, help="graph file to write (.igz)")
     p.add_argument("--max-samples", type=int, default=None, help="sampler archive size (default 600000)")
     p.add_argument("--min-new", type=int, default=None,
@@ -139,7 +141,7 @@ def _options(args: argparse.Namespace):
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from motion_graph.library import LibraryParams, build_library, load_library
+    from motion_graph.library import LibraryParams, load_library
 
     from igraph_fight.build.pipeline import build_fingerprint, build_graph
     from igraph_fight.build.explore import read_checkpoint_header
@@ -150,6 +152,9 @@ def cmd_build(args: argparse.Namespace) -> int:
         options = _options(args)
     except ValueError as e:
         print(f"igraph-fight: error: {e}", file=sys.stderr)
+        return 2
+    if args.target_skeleton and args.library:
+        print("igraph-fight: error: --target-skeleton applies to mocap takes, not to --library", file=sys.stderr)
         return 2
     if args.address is not None and args.backend != "ray":
         print("igraph-fight: error: --address needs --backend ray", file=sys.stderr)
@@ -168,7 +173,15 @@ def cmd_build(args: argparse.Namespace) -> int:
         params = LibraryParams()
         if args.next_threshold is not None:
             params = LibraryParams(next_threshold_m=args.next_threshold)
-        lib = build_library(args.mocap, params, progress=show)
+        from motion_graph.errors import MocapFormatError
+        from motion_graph.paths import boxing_files
+        from motion_graph.retarget import build_retargeted_library
+        try:
+            files = args.mocap or boxing_files(None)
+            lib = build_retargeted_library(files, params, args.target_skeleton, progress=show)
+        except MocapFormatError as e:
+            print(f"igraph-fight: error: {e}", file=sys.stderr)
+            return 2
     ckpt = Path(args.checkpoint) if args.checkpoint else Path(str(args.out) + ".ckpt")
     if args.restart and ckpt.exists():
         shutil.rmtree(ckpt)

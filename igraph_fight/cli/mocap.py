@@ -22,7 +22,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_inspect)
 
     p = msub.add_parser("segment", help="cut mocap into labelled actions and write an action library")
-    p.add_argument("files", nargs="*", help=".bvh/.amc files or folders (default: the CMU boxing takes)")
+    p.add_argument("files", nargs="*", help=".bvh/.amc files or folders (default: the shared boxing takes 13_17, 13_18 and 14_02, on 13_17's body)")
     p.add_argument("--mocap", default=None, help="mocap folder used when no files are given")
     p.add_argument("--out", default=None, help="action-library file to write (.npz)")
     p.add_argument("--labels", default=None, help="user label file overriding automatic labels")
@@ -32,13 +32,13 @@ def register(sub) -> None:
     p.add_argument("--next-threshold", type=positive_float, default=None,
                    help="pose-hub size (m): boundary poses within this mean joint distance share a hub, and a -> b when b starts in the hub where a ends (default 0.20)")
     p.add_argument("--retarget", action="store_true",
-                   help="map takes of different skeletons onto one body (the first take's) before segmenting")
+                   help="map takes of different skeletons onto one body (the first take's) before segmenting (always done for the default takes)")
     p.add_argument("--target-skeleton", default=None, metavar="FILE",
                    help="with --retarget (implied): the mocap file whose skeleton and frame rate are the target")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_segment)
 
-    p = sub.add_parser("demo", help="run the whole kinematic chain on the CMU boxing takes and write its artifacts")
+    p = sub.add_parser("demo", help="run the whole kinematic chain on the shared boxing takes and write its artifacts")
     p.add_argument("--mocap", default=None, help="mocap folder (default: $IGRAPH_FIGHT_MOCAP or ../shared/mocap)")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=non_negative_int, default=0)
@@ -112,7 +112,7 @@ def cmd_segment(args: argparse.Namespace) -> int:
         params = dataclasses.replace(params, next_threshold_m=args.next_threshold)
     progress = not args.json and sys.stderr.isatty()
     retarget_report = None
-    if args.retarget or args.target_skeleton:
+    if args.retarget or args.target_skeleton or not args.files:
         from motion_graph.retarget import segment_retargeted
         clips, target, takes = segment_retargeted(files, params, args.target_skeleton, progress, args.fps)
         retarget_report = {"target": target.source, "target_fps": target.fps, "takes": takes}

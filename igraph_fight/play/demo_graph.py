@@ -28,16 +28,15 @@ def ensure_demo_graph(mocap: str | None = None, progress: bool = True, out=sys.s
     """The cached demo graph's path, built first when missing or stale (module docstring).
     ``options``: the build options (default: the demo's, igraph_fight.demo)."""
     from motion_graph.atomic import atomic_write_text
-    from motion_graph.library import LibraryParams, library_from_clips, segment_files
     from motion_graph.paths import boxing_files
+    from motion_graph.retarget import build_retargeted_library
 
     from igraph_fight.build.pipeline import BuildOptions, build_graph
     from igraph_fight.demo import DEMO_MAX_SAMPLES, DEMO_SEED_BOUTS
     from igraph_fight.graph import header_summary, library_fingerprint
 
     files = boxing_files(mocap)
-    params = LibraryParams()
-    lib = library_from_clips(segment_files(files, params, progress=False), params)
+    lib = build_retargeted_library(files)
     fp = library_fingerprint(lib)
     if options is None:
         options = replace(BuildOptions(), max_samples=DEMO_MAX_SAMPLES, seed_bouts=DEMO_SEED_BOUTS)

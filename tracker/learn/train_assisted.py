@@ -308,64 +308,13 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
         if elapsed >= minutes * 60 or (max_iterations is not None and it >= max_iterations):
             break
         # ---- collect ------------------------------------------------------------------------
-        O = np.zeros((T, N, obs_dim), np.float32)
-        FX = np.zeros((T, N, N_ASSIST), np.float32)
-        RAW = np.zeros((T, N, obs_dim))
-        A = np.zeros((T, N, act_dim), np.float32)
-        LP = np.zeros((T, N), np.float32)
-        R = np.zeros((T, N), np.float32)
-        V = np.zeros((T, N), np.float32)
-        NV = np.zeros((T, N), np.float32)
-        C = np.zeros((T, N), np.float32)
-        for t in range(T):
-            RAW[t] = roll.obs
-            x = norm(roll.obs).astype(np.float32)
-            with torch.no_grad():
-                xt = torch.from_numpy(x)
-                fx = roll.obs[:, -N_ASSIST:].astype(np.float32)
-                FX[t] = fx
-                mu, log_std = actor(xt, torch.from_numpy(fx))
-                std = log_std.exp()
-                a = mu + std * torch.randn_like(mu)
-                lp = (-0.5 * ((a - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
-                v = critic(xt).squeeze(-1)
-            an = a.numpy().astype(np.float64)
-            targets = env.reference_targets() + np.clip(an[:, :env.n_act], -cfg.residual_clip, cfg.residual_clip)
-            assist = np.clip(an[:, env.n_act:], -1.0, 1.0)
-            roll.push()
-            obs2, rew, done, info = env.step(targets, assist)
-            roll.steps += 1
-            roll.ep_return += rew
-            roll.ep_assist += env.assist_force_mg
-            fell = info["fall"] != 0
-            lost = info["mpjpe_m"] > cfg.et_mpjpe_m
-            term = fell | lost
-            cut = (done & ~term) | (roll.steps >= cfg.max_episode_steps)
-            O[t], A[t], LP[t], R[t], V[t] = x, a.numpy(), lp.numpy(), rew, v.numpy()
-            # next value: 0 after a termination, V(final obs) after a cut, else V(s_t+1) (filled below)
-            ended = term | cut
-            if cut.any():
-                with torch.no_grad():
-                    vc = critic(torch.from_numpy(norm(obs2).astype(np.float32))).squeeze(-1).numpy()
-                NV[t] = np.where(cut & ~term, vc, 0.0)
-            C[t] = (~ended).astype(np.float32)
-            for b in np.nonzero(ended)[0]:
-                n = int(roll.steps[b])
-                completions.append(0.0 if term[b] else 1.0)
-                roll.finished.append({"steps": n, "return": float(roll.ep_return[b]), "fell": bool(term[b]),
-                                      "assist_mg": float(roll.ep_assist[b] / max(n, 1))})
-                roll._start(b)
-            roll.obs = env.observe() if ended.any() else obs2
-        with torch.no_grad():
-            v_last = critic(torch.from_numpy(norm(roll.obs).astype(np.float32))).squeeze(-1).numpy()
-        nxt = np.concatenate([V[1:], v_last[None]], axis=0)
-        NV = np.where(C > 0, nxt, NV)
-        adv, ret = gae(R, V, NV, C, cfg.gamma, cfg.lam)
+        b = collect_walks(roll, actor, critic, norm, cfg, completions)
+        R = b["r"]
         # ---- PPO update ---------------------------------------------------------------------
         n = T * N
-        kl = ppo_update(actor, critic, opt, O.reshape(n, obs_dim), FX.reshape(n, N_ASSIST), A.reshape(n, act_dim),
-                        LP.reshape(n), adv.reshape(n), ret.reshape(n), cfg, cfg.seed * 100_003 + budget["iterations"])
-        norm.update(RAW.reshape(-1, obs_dim))     # after the update: the batch used the old statistics
+        kl = ppo_update(actor, critic, opt, b["z"], b["fx"], b["a"], b["lp"], b["adv"], b["ret"], cfg,
+                        cfg.seed * 100_003 + budget["iterations"])
+        norm.update(b["raw"])     # after the update: the batch used the old statistics
         # ---- curriculum, bookkeeping ----------------------------------------------------------
         budget["samples"] += n
         budget["iterations"] += 1
@@ -402,6 +351,76 @@ def train(out: str, minutes: float, cfg: AssistedTrainConfig = AssistedTrainConf
     save()
     return {"out": str(out), "budget": budget, "cap": roll.cap, "last": curve[-1] if curve else {}}
 
+
+
+def collect_walks(roll: Rollouts, actor, critic, norm: RunningNorm, cfg: AssistedTrainConfig,
+                  completions: list[float]) -> dict:
+    """``cfg.horizon`` control steps of the ``n_envs`` walks (module docstring, item 2), sampling the
+    policy; an ended episode restarts its slot and appends 1.0 (cut) or 0.0 (terminated) to
+    ``completions``. Returns the batch flattened over (step, slot): normalised and raw observations
+    ``z``, ``raw``, fixed-PD wrenches ``fx``, actions ``a``, log-probabilities ``lp``, rewards ``r``,
+    advantages ``adv`` and returns ``ret`` (GAE)."""
+    import torch
+    env = roll.env
+    N, T = cfg.n_envs, cfg.horizon
+    obs_dim, act_dim = roll.obs.shape[1], env.n_act + N_ASSIST
+    O = np.zeros((T, N, obs_dim), np.float32)
+    FX = np.zeros((T, N, N_ASSIST), np.float32)
+    RAW = np.zeros((T, N, obs_dim))
+    A = np.zeros((T, N, act_dim), np.float32)
+    LP = np.zeros((T, N), np.float32)
+    R = np.zeros((T, N), np.float32)
+    V = np.zeros((T, N), np.float32)
+    NV = np.zeros((T, N), np.float32)
+    C = np.zeros((T, N), np.float32)
+    for t in range(T):
+        RAW[t] = roll.obs
+        x = norm(roll.obs).astype(np.float32)
+        with torch.no_grad():
+            xt = torch.from_numpy(x)
+            fx = roll.obs[:, -N_ASSIST:].astype(np.float32)
+            FX[t] = fx
+            mu, log_std = actor(xt, torch.from_numpy(fx))
+            std = log_std.exp()
+            a = mu + std * torch.randn_like(mu)
+            lp = (-0.5 * ((a - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+            v = critic(xt).squeeze(-1)
+        an = a.numpy().astype(np.float64)
+        targets = env.reference_targets() + np.clip(an[:, :env.n_act], -cfg.residual_clip, cfg.residual_clip)
+        assist = np.clip(an[:, env.n_act:], -1.0, 1.0)
+        roll.push()
+        obs2, rew, done, info = env.step(targets, assist)
+        roll.steps += 1
+        roll.ep_return += rew
+        roll.ep_assist += env.assist_force_mg
+        fell = info["fall"] != 0
+        lost = info["mpjpe_m"] > cfg.et_mpjpe_m
+        term = fell | lost
+        cut = (done & ~term) | (roll.steps >= cfg.max_episode_steps)
+        O[t], A[t], LP[t], R[t], V[t] = x, a.numpy(), lp.numpy(), rew, v.numpy()
+        # next value: 0 after a termination, V(final obs) after a cut, else V(s_t+1) (filled below)
+        ended = term | cut
+        if cut.any():
+            with torch.no_grad():
+                vc = critic(torch.from_numpy(norm(obs2).astype(np.float32))).squeeze(-1).numpy()
+            NV[t] = np.where(cut & ~term, vc, 0.0)
+        C[t] = (~ended).astype(np.float32)
+        for b in np.nonzero(ended)[0]:
+            n = int(roll.steps[b])
+            completions.append(0.0 if term[b] else 1.0)
+            roll.finished.append({"steps": n, "return": float(roll.ep_return[b]), "fell": bool(term[b]),
+                                  "assist_mg": float(roll.ep_assist[b] / max(n, 1))})
+            roll._start(b)
+        roll.obs = env.observe() if ended.any() else obs2
+    with torch.no_grad():
+        v_last = critic(torch.from_numpy(norm(roll.obs).astype(np.float32))).squeeze(-1).numpy()
+    nxt = np.concatenate([V[1:], v_last[None]], axis=0)
+    NV = np.where(C > 0, nxt, NV)
+    adv, ret = gae(R, V, NV, C, cfg.gamma, cfg.lam)
+    n = T * N
+    return {"z": O.reshape(n, obs_dim), "raw": RAW.reshape(n, obs_dim), "fx": FX.reshape(n, N_ASSIST),
+            "a": A.reshape(n, act_dim), "lp": LP.reshape(n), "r": R.reshape(n), "adv": adv.reshape(n),
+            "ret": ret.reshape(n)}
 
 
 def ppo_update(actor, critic, opt, O: np.ndarray, FX: np.ndarray, A: np.ndarray, LP: np.ndarray, adv: np.ndarray,

@@ -18,7 +18,9 @@ inside physics bouts (tracker.bouts.physics_bout, the bout rules unchanged). Rea
    bout's end cuts it (bootstrapped); the steps it lies down are not samples. Reward: the batched
    env's tracking terms times the assist penalty (as in walk training), per fighter.
 4. ``train_assisted.ppo_update`` on the iteration's samples; the observation normaliser updated
-   after it (the batch used the old statistics).
+   after it (the batch used the old statistics). Then ``walks_per_bout`` iterations of the walk
+   route (``train_assisted.collect_walks``, its pushes included) on the same library, so that what
+   the bouts teach does not erase the walks of every action the bouts rarely play.
 5. ``train_in_bouts``: the loop, a progress bar, a checkpoint (the walk trainer's format, resumable
    by either route) every ``ckpt_every_min`` minutes and at the end, atomically; ``bout_curve``
    rows (reward, falls per fighter and minute, mean wrench, planned hits realised) and a PNG
@@ -36,7 +38,7 @@ import numpy as np
 
 from igraph_fight.learn.ppo import gae
 from tracker.learn.train_assisted import (
-    AssistedTrainConfig, RunningNorm, assisted_nets, plain_config, ppo_update)
+    AssistedTrainConfig, Rollouts, RunningNorm, assisted_nets, collect_walks, plain_config, ppo_update)
 from tracker.track.assisted_policy import FORMAT, N_ASSIST, VERSION, actor_layers, mlp_forward
 
 
@@ -49,6 +51,7 @@ class BoutTrainConfig:
     bout_seconds: float = 60.0
     seed0: int = 1_000_000
     noise_seed: int = 0
+    walks_per_bout: int = 2
 
     @classmethod
     def from_dict(cls, d: dict) -> "BoutTrainConfig":
@@ -164,6 +167,8 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
         raise ValueError(f"minutes must be positive, got {minutes}")
     if len(bout_cfg.styles) != 2:
         raise ValueError(f"styles must name two fighters, got {bout_cfg.styles!r}")
+    if bout_cfg.walks_per_bout < 0:
+        raise ValueError(f"walks_per_bout must be >= 0, got {bout_cfg.walks_per_bout}")
     torch.set_num_threads(1)
     path = str(resume or DEFAULT_ASSISTED_CKPT)
     prior = load_checkpoint(path, FORMAT, (VERSION,), "assisted-tracker checkpoint")
@@ -188,6 +193,13 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
     norm.var = np.asarray(prior["obs_var"], float)
     norm.count = float(prior["obs_count"])
     bout_curve = list(prior.get("bout_curve", []))
+    roll = None
+    walk_done: list[float] = []
+    if bout_cfg.walks_per_bout > 0:
+        roll = Rollouts(cfg, lib, cfg.seed * 1000 + budget["runs"])
+        roll.set_cap(cap)
+        if roll.obs.shape[1] != obs_dim:
+            raise ValueError(f"walk observations have {roll.obs.shape[1]} values, the checkpoint {obs_dim}")
     agents = {s: make_agent(s, g, lib, bout_cfg.depth) for s in bout_cfg.styles}
     bcfg = replace(BoutConfig(), seconds=float(bout_cfg.bout_seconds), record_qpos=False)
     done_bouts = len(bout_curve)
@@ -230,10 +242,23 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
             norm.update(batch["raw"])
         budget["samples"] += n
         budget["iterations"] += 1
+        n_walk = 0
+        for _ in range(bout_cfg.walks_per_bout):
+            wb = collect_walks(roll, actor, critic, norm, cfg, walk_done)
+            ppo_update(actor, critic, opt, wb["z"], wb["fx"], wb["a"], wb["lp"], wb["adv"], wb["ret"], cfg,
+                       cfg.seed * 100_003 + budget["iterations"])
+            norm.update(wb["raw"])
+            roll.refresh()
+            roll.finished = []
+            n_walk += len(wb["r"])
+            budget["samples"] += len(wb["r"])
+            budget["iterations"] += 1
+        del walk_done[:-200]
         it += 1
         minutes_bout = float(s["seconds"]) / 60.0
         row = {"samples": int(budget["samples"]), "cpu_h": (cpu_base + time.process_time() - cpu0) / 3600,
-               "bout": i, "a": a_style, "b": b_style, "bout_samples": n,
+               "bout": i, "a": a_style, "b": b_style, "bout_samples": n, "walk_samples": n_walk,
+               "walk_completion": float(np.mean(walk_done)) if walk_done else float("nan"),
                "reward_per_step": float(batch["r"].mean()) if n else float("nan"),
                "falls_per_min": (s["falls_a"] + s["falls_b"]) / (2.0 * minutes_bout),
                "assist_mg": 0.5 * (s["assist_a"]["force_mean_mg"] + s["assist_b"]["force_mean_mg"]),
@@ -245,7 +270,8 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
             bar.n = int(min(time.perf_counter() - wall0, minutes * 60))
             recent = bout_curve[-10:]
             bar.set_postfix(falls=f"{np.mean([r['falls_per_min'] for r in recent]):.2f}",
-                            assist=f"{row['assist_mg']:.3f}", sps=f"{row['steps_per_s']:.0f}")
+                            assist=f"{row['assist_mg']:.3f}", walks=f"{row['walk_completion']:.2f}",
+                            sps=f"{row['steps_per_s']:.0f}")
             bar.refresh()
         elif log is not None and it % 10 == 0:
             log(row)
@@ -280,7 +306,10 @@ def plot_bout_curve(curve: list[dict], path: str, window: int = 20) -> None:
               ("falls_per_min", [r["falls_per_min"] for r in curve], "falls per fighter and minute"),
               ("assist_mg", [r["assist_mg"] for r in curve], "mean |F| / mg"),
               ("realised", None, "planned hits realised"))
-    fig, ax = plt.subplots(1, 4, figsize=(16, 3.4))
+    walks = [r.get("walk_completion", float("nan")) for r in curve]
+    if np.isfinite(walks).any():
+        series += (("walk_completion", walks, "walk episodes completed (last 200)"),)
+    fig, ax = plt.subplots(1, len(series), figsize=(4 * len(series), 3.4))
     for a, (key, vals, title) in zip(ax, series):
         if key == "realised":
             k = min(window, len(ph))

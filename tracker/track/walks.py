@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -87,18 +86,10 @@ class ClipWindows:
 
 
 def default_library(mocap_root: str | os.PathLike | None = None):
-    """Build the action library from the shared CMU boxing takes (motion_graph.build_library)."""
-    from motion_graph.library import build_library
-    from motion_graph.errors import MocapFormatError
-    from motion_graph.paths import boxing_takes, find_mocap_root
-
-    root = find_mocap_root(mocap_root)
-    if root is None or not Path(root).is_dir():
-        raise MocapFormatError(str(root or "../shared/mocap"), "mocap folder not found (give --library or --mocap)")
-    files = boxing_takes(Path(root))
-    if not files:
-        raise MocapFormatError(str(root), "no CMU boxing takes 13_17 / 13_18 found")
-    return build_library(files)
+    """The default action library (motion_graph.retarget.default_boxing_library: the shared boxing
+    takes on 13_17's body)."""
+    from motion_graph.retarget import default_boxing_library
+    return default_boxing_library(mocap_root)
 
 
 def walk_source(library: str | os.PathLike | None = None, mocap_root: str | os.PathLike | None = None,

@@ -1,7 +1,8 @@
 """Physically measured hit odds for the Interaction Graph fighter's first ply.
 
-In physics bouts the planner's kinematic hit predictions hold for about 12% of its planned hits
-(research/notes/BOUTS.md): the bodies are not where each reference's displacement puts them. This
+In physics bouts the planner's kinematic hit predictions hold for a minority of its planned hits
+(about a third under the assisted tracker, 12% under the legacy one: docs/tracker.md): the bodies
+are not where each reference's displacement puts them. This
 module learns from physics bouts what the kinematic simulator cannot know: the odds that an
 action launched now lands at least one realised hit (``given``) and that the fighter is hit
 while it plays it (``received``), from the live coupled state, the physical features of both

@@ -64,6 +64,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+import motion_graph.rotations
+import planner.rewards
 from motion_graph.classify import KINDS
 from planner import Policy, SearchGraph, Style, compute_policy, load_style
 from planner.rewards import style_params
@@ -76,8 +78,6 @@ from igraph_fight import locate, search as search_module, sim
 from igraph_fight.kernel_cache import drop_stale_caches
 from igraph_fight.search import search
 from igraph_fight.sim import expand_one
-import motion_graph.rotations
-import planner.rewards
 
 drop_stale_caches(__file__, [locate, search_module, sim, planner.rewards, motion_graph.rotations])
 

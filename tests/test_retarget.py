@@ -203,9 +203,8 @@ def test_default_takes_are_13s_two_then_14_02_where_present(tmp_path):
 
 
 @pytest.mark.realdata
-def test_library_of_two_performers_on_one_body(take_14_02, boxing_files, mocap_root):
-    from motion_graph.retarget import default_boxing_library
-    lib = default_boxing_library(mocap_root)
+def test_library_of_two_performers_on_one_body(take_14_02, boxing_files, default_library):
+    lib = default_library                          # motion_graph.retarget.default_boxing_library
     again = build_retargeted_library([*boxing_files, take_14_02.source])
     assert lib.n_actions == again.n_actions and np.array_equal(lib.rotations, again.rotations)
     assert lib.skeleton.names == load_target(boxing_files[0]).skeleton.names

@@ -173,15 +173,9 @@ def cmd_build(args: argparse.Namespace) -> int:
         params = LibraryParams()
         if args.next_threshold is not None:
             params = LibraryParams(next_threshold_m=args.next_threshold)
-        from motion_graph.errors import MocapFormatError
         from motion_graph.paths import boxing_files
         from motion_graph.retarget import build_retargeted_library
-        try:
-            files = args.mocap or boxing_files(None)
-            lib = build_retargeted_library(files, params, args.target_skeleton, progress=show)
-        except MocapFormatError as e:
-            print(f"igraph-fight: error: {e}", file=sys.stderr)
-            return 2
+        lib = build_retargeted_library(args.mocap or boxing_files(None), params, args.target_skeleton, progress=show)
     ckpt = Path(args.checkpoint) if args.checkpoint else Path(str(args.out) + ".ckpt")
     if args.restart and ckpt.exists():
         shutil.rmtree(ckpt)

@@ -74,7 +74,7 @@ Rules (what ``run`` does; every number is a BoutConfig field):
   from them, the bout reports their sums. The clip is this module's approximation: a boxer's
   joints stay below it (300 rad/s^2 on all 66 joints is 5.9e6), while a step on which
   MuJoCo reports an unstable simulation and resets the state gives orders of magnitude more
-  (one such step in a 40-minute RL run moved the mean reward per decision from -0.01 to -8e6).
+  (enough to move a whole PPO batch's mean reward per decision from about -0.01 to -8e6).
 * Real-time factor: simulated seconds / wall seconds of the whole bout loop (decisions,
   references, tracking policy, physics, hit judging), rendering excluded.
 """

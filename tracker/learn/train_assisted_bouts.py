@@ -253,7 +253,7 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
             n_walk += len(wb["r"])
             budget["samples"] += len(wb["r"])
             budget["iterations"] += 1
-        del walk_done[:-200]
+        del walk_done[:-cfg.curriculum_window]
         it += 1
         minutes_bout = float(s["seconds"]) / 60.0
         row = {"samples": int(budget["samples"]), "cpu_h": (cpu_base + time.process_time() - cpu0) / 3600,

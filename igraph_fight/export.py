@@ -101,7 +101,7 @@ def export_npc(graph, styles: list[str], depths: list[int], out: str | os.PathLi
         edge_action = np.asarray(a["edge_action"], dtype=np.int64)
         menu_off = np.asarray(lib.next_offsets, dtype=np.int64)
         menu_ids = np.asarray(lib.next_ids, dtype=np.int64)
-        w = gc.Writer()
+        w = gc.Writer(spool_dir=os.path.dirname(os.path.abspath(out)))
         sections = {
             "nextset_of": w.blob(nextset_of.astype(gc.narrow_dtype(nextset_of)), True),
             "menu_offsets": w.blob(menu_off.astype(gc.narrow_dtype(menu_off)), True),
@@ -153,6 +153,7 @@ def export_npc(graph, styles: list[str], depths: list[int], out: str | os.PathLi
             written.update(w.finish(fh, index, _seal, MAGIC))
 
         atomic_write(out, write, mode="wb")
+        w.close()
     finally:
         ctrl.close()
     size = Path(out).stat().st_size

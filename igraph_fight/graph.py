@@ -174,11 +174,30 @@ def _decode_workers() -> int:
     return max(1, int(numba.config.NUMBA_NUM_THREADS))
 
 
+class ReplayRefused(ValueError):
+    """A shard of replayed_shards that cannot be replayed (an index out of range)."""
+
+
 def replayed_arrays(arrays, header: dict, library=None, workers: int | None = 1) -> dict[str, np.ndarray] | str:
     """The REPLAYED arrays as the replay of ``arrays``' edges gives them, with the embedded
     library (or ``library``) and ``header``'s simulator options, or a string saying why they
     cannot be replayed."""
-    from igraph_fight.graph_replay import replay_edges
+    shards = replayed_shards(arrays, header, library, workers, shard_edges=max(len(arrays["edge_target"]), 1))
+    if isinstance(shards, str):
+        return shards
+    try:
+        for _, _, r in shards:
+            return r
+    except ReplayRefused as e:
+        return f"cannot replay the edges ({e})"
+    return "cannot replay the edges (no shard)"
+
+
+def replayed_shards(arrays, header: dict, library=None, workers: int | None = 1, shard_edges: int = 1 << 18):
+    """replayed_arrays shard by shard (graph_replay.iter_replay): an iterator of (e0, e1, the
+    REPLAYED arrays at edges [e0, e1)) over runs of whole states, or a string saying why the
+    edges cannot be replayed (checked before the first shard)."""
+    from igraph_fight.graph_replay import check_inputs, iter_replay
     from igraph_fight.sim import SimParams, SimTables
 
     try:
@@ -191,16 +210,25 @@ def replayed_arrays(arrays, header: dict, library=None, workers: int | None = 1)
         opts = (opts.get("sim") if isinstance(opts, dict) else None) or {}
         check_options({"sim": opts}, "<graph>")
         tables = SimTables.from_library(library, SimParams(**opts))
-        with np.errstate(all="ignore"):
-            r = replay_edges(tables, arrays, workers)
-            t = np.asarray(arrays["edge_target"])
-            r["edge_snap_r"] = np.abs(r["landing_r"] - np.asarray(arrays["state_r"])[t])
-            r["edge_snap_theta"] = np.maximum(
-                np.abs(wrap_angle(r["landing_theta_self"] - np.asarray(arrays["state_theta_self"])[t])),
-                np.abs(wrap_angle(r["landing_theta_other"] - np.asarray(arrays["state_theta_other"])[t])))
+        problem = check_inputs(tables, arrays)
     except (LibraryFormatError, ValueError, TypeError, IndexError, KeyError) as e:
         return f"cannot replay the edges ({getattr(e, 'problem', None) or e})"
-    return {k: r[k] for k in REPLAYED}
+    if problem is not None:
+        return f"cannot replay the edges ({problem})"
+    s_r, s_ts, s_to = (np.asarray(arrays[k]) for k in ("state_r", "state_theta_self", "state_theta_other"))
+    S = len(s_r)
+
+    def shards():
+        for e0, e1, r in iter_replay(tables, arrays, workers, shard_edges=shard_edges):
+            t = np.asarray(arrays["edge_target"][e0:e1])
+            if len(t) and (t.min() < 0 or t.max() >= S):
+                raise ReplayRefused("edge_target: a state outside the graph")
+            with np.errstate(all="ignore"):
+                r["edge_snap_r"] = np.abs(r["landing_r"] - s_r[t])
+                r["edge_snap_theta"] = np.maximum(np.abs(wrap_angle(r["landing_theta_self"] - s_ts[t])),
+                                                  np.abs(wrap_angle(r["landing_theta_other"] - s_to[t])))
+            yield e0, e1, {k: r[k] for k in REPLAYED}
+    return shards()
 
 
 def _replayed(name: str) -> Callable:
@@ -461,9 +489,12 @@ def _check_arrays(a, header: dict, name: str) -> None:
         bad("state_offsets", f"not {S + 1} non-decreasing offsets from 0 to {E}")
     for k, x in x_of.items():
         v = _values(x)
-        if k in ALL_ARRAYS and v.dtype.kind == "f" and not np.isfinite(v).all():
-            i = int(np.argmax(~np.isfinite(v)))
-            bad(k, f"{v[i]} {_at(x, i)} is not finite")
+        if k in ALL_ARRAYS and v.dtype.kind == "f":
+            for lo, hi in gc.chunks(len(v)):  # piece by piece: no temporary as long as the array
+                fin = np.isfinite(v[lo:hi])
+                if not fin.all():
+                    i = lo + int(np.argmin(fin))
+                    bad(k, f"{v[i]} {_at(x, i)} is not finite")
     for k in NON_NEGATIVE:
         _within(name, k, x_of[k], 0.0, 1e6)
     for k in ANGLES:
@@ -513,28 +544,37 @@ def _check_with_library(a, header: dict, lib, name: str) -> None:
                                      f"{ns[i]} of its action {m_self[i]}")
     n_strikes = np.minimum(np.diff(np.asarray(lib.strike_offsets, np.int64))[m_other], 62)
     _within(name, "state_mask_other", x_of["state_mask_other"], 0, np.left_shift(np.int64(1), n_strikes))
-    deg = np.diff(v["state_offsets"])
-    action = v["edge_action"]
-    src = np.repeat(m_self, deg)  # the source state's action per edge, in m_self's (stored) dtype
+    off = np.asarray(v["state_offsets"], dtype=np.int64)
+    deg_all = np.diff(off)
+    action_all = v["edge_action"]
     if A <= 4096:  # a table of legal (action, next action) pairs
         legal = np.zeros((A, A), dtype=np.bool_)
         legal[np.repeat(np.arange(A), np.diff(np.asarray(lib.next_offsets, np.int64))), np.asarray(lib.next_ids)] = True
-        ok = legal[src, action]
     else:  # sorted (action, next action) keys
         menu = np.unique(np.repeat(np.arange(A, dtype=np.int64), np.diff(np.asarray(lib.next_offsets, np.int64))) * A
                          + np.asarray(lib.next_ids, np.int64))
-        key = src.astype(np.int64) * A + action
-        ok = menu[np.minimum(np.searchsorted(menu, key), len(menu) - 1)] == key if len(menu) else key < 0
-    if not ok.all():
-        e = int(np.argmin(ok))
-        raise GraphFormatError(name, f"edge_action: {action[e]} at [{e}] is not in the menu of its state's "
-                                     f"action {src[e]}")
     kinds = np.asarray(lib.kinds)
     kinds = kinds.astype(gc.narrow_dtype(kinds))
-    for k, want in (("feat_kind", kinds[action]), ("feat_other_kind", np.repeat(kinds[m_other], deg))):
-        if not np.array_equal(v[k], want):
-            e = int(np.argmax(v[k] != want))
-            raise GraphFormatError(name, f"{k}: {v[k][e]} at [{e}] is not the kind {want[e]} of its action")
+    from igraph_fight.graph_replay import state_runs
+    for s0, s1 in state_runs(off, gc.CHUNK):  # runs of whole states: memory bounded by a run's edges
+        e0, e1 = int(off[s0]), int(off[s1])
+        deg = deg_all[s0:s1]
+        action = np.asarray(action_all[e0:e1])
+        src = np.repeat(m_self[s0:s1], deg)  # the source state's action per edge, in m_self's (stored) dtype
+        if A <= 4096:
+            ok = legal[src, action]
+        else:
+            key = src.astype(np.int64) * A + action
+            ok = menu[np.minimum(np.searchsorted(menu, key), len(menu) - 1)] == key if len(menu) else key < 0
+        if not ok.all():
+            e = int(np.argmin(ok))
+            raise GraphFormatError(name, f"edge_action: {action[e]} at [{e0 + e}] is not in the menu of its state's "
+                                         f"action {src[e]}")
+        for k, want in (("feat_kind", kinds[action]), ("feat_other_kind", np.repeat(kinds[m_other[s0:s1]], deg))):
+            got = np.asarray(v[k][e0:e1])
+            if not np.array_equal(got, want):
+                e = int(np.argmax(got != want))
+                raise GraphFormatError(name, f"{k}: {got[e]} at [{e0 + e}] is not the kind {want[e]} of its action")
 
 
 def _check_members(header: dict, members: dict, name: str) -> None:
@@ -1021,29 +1061,30 @@ class InteractionGraph:
         return g
 
 
-def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray],
-                    replay: dict[str, np.ndarray] | None = None) -> dict[str, dict]:
+def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray], replay=None) -> dict[str, dict]:
     """The member specs of a version 3 file for ``arrays`` (their blobs added to ``w``), or of a
-    version 4 file with ``replay`` (replayed_arrays of ``arrays``): see the module docstring for
-    which array is stored how."""
+    version 4 file with ``replay`` (replayed_shards of ``arrays``: the replayed arrays' values,
+    shard by shard): see the module docstring for which array is stored how. Every array is read
+    piece by piece (graph_compact.CHUNK values, or one replay shard, at a time)."""
     members = {}
+    if replay is not None:
+        enc = {k: gc.DerivedEncoder(arrays[k], replay_formula(k), crc=True) for k in REPLAYED}
+        for e0, e1, r in replay:
+            for k, e in enc.items():
+                e.update(e0, e1, r[k])
+        for k, e in enc.items():
+            spec = e.finish(w)
+            if spec is not None:
+                members[k] = spec
     for k in [*ALL_ARRAYS, *(("library_npz",) if "library_npz" in arrays else ())]:
-        a = np.ascontiguousarray(arrays[k])
+        if k in members:
+            continue
+        a = arrays[k]
         spec = None
-        if replay is not None and k in replay and np.shape(replay[k]) == a.shape:
-            spec = gc.encode_derived(w, a, replay_formula(k), replay[k], crc=True)
-        if spec is not None:
-            pass
-        elif k == "state_offsets":
-            spec = gc.encode_offsets(w, a)
+        if k == "state_offsets":
+            spec = gc.encode_offsets(w, np.asarray(a))
         elif k in DERIVED:
-            try:
-                with np.errstate(all="ignore"):
-                    derived = DERIVED[k](arrays)
-            except (IndexError, ValueError, TypeError):  # arrays that do not fit together (crafted files)
-                derived = None
-            if derived is not None and np.shape(derived) == a.shape:
-                spec = gc.encode_derived(w, a, k, derived)
+            spec = _encode_formula(w, arrays, k)
         if spec is None:
             if k in COMPACT_MAPPED or k in COMPACT_COPIED:
                 spec = gc.encode_raw(w, a, copy=k in COMPACT_COPIED)
@@ -1052,7 +1093,25 @@ def compact_members(w: "gc.Writer", arrays: dict[str, np.ndarray],
             else:
                 spec = gc.encode_floats(w, a, deflate=True)
         members[k] = spec
-    return members
+    return {k: members[k] for k in [*ALL_ARRAYS, *(("library_npz",) if "library_npz" in arrays else ())]}
+
+
+def _encode_formula(w: "gc.Writer", arrays: dict[str, np.ndarray], k: str) -> dict | None:
+    """Edge array ``k`` as its DERIVED formula, evaluated piece by piece over the edges (None where
+    the arrays do not fit together, as in crafted files, or too many values differ)."""
+    a = arrays[k]
+    e = gc.DerivedEncoder(a, k)
+    for lo, hi in gc.chunks(len(a)):
+        part = {n: (arrays[n][lo:hi] if n in EDGE_ARRAYS else arrays[n]) for n in ALL_ARRAYS}
+        try:
+            with np.errstate(all="ignore"):
+                derived = DERIVED[k](part)
+        except (IndexError, ValueError, TypeError):
+            return None
+        if np.shape(derived) != (hi - lo,):
+            return None
+        e.update(lo, hi, derived)
+    return e.finish(w)
 
 
 def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray], version: int = VERSION,
@@ -1060,28 +1119,37 @@ def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.nd
     """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a compact file of ``version``
     (3 or 4), atomically, without validating them; returns the index written (the header with
     ``members`` and ``checksum``). Version 4 replays the edges with ``library`` (default: the
-    embedded one) where it can (replayed_arrays). ``save`` is the way to write a graph; this is
-    what it calls."""
+    embedded one) where it can (replayed_shards). The arrays may be memory-mapped files: they are
+    read piece by piece, the blobs spooled to a temporary file beside ``path`` and copied behind
+    the index, so that memory does not grow with the edges (docs/scaling.md). ``save`` is the way
+    to write a graph; this is what it calls."""
     if version not in COMPACT_VERSIONS:
         raise ValueError(f"compact graph files are versions {COMPACT_VERSIONS}, not {version!r}")
     replay = None
     if version >= 4 and ("library_npz" in arrays or library is not None):
-        replay = replayed_arrays(arrays, header, library)
-        replay = replay if isinstance(replay, dict) else None
-    w = gc.Writer()
-    header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": version,
-              "members": compact_members(w, arrays, replay)}
+        replay = replayed_shards(arrays, header, library)
+        replay = None if isinstance(replay, str) else replay
+    try:
+        return _write_compact(path, header, arrays, version, replay)
+    except ReplayRefused:  # a shard the replay refused: the arrays stored as they are
+        return _write_compact(path, header, arrays, version, None)
+
+
+def _write_compact(path, header: dict, arrays: dict[str, np.ndarray], version: int, replay) -> dict:
     out: dict = {}
+    with gc.Writer(spool_dir=os.path.dirname(os.path.abspath(path))) as w:
+        header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": version,
+                  "members": compact_members(w, arrays, replay)}
 
-    def write(fh) -> None:
-        out.update(w.finish(fh, header, lambda h: graph_checksum(h, {}, version)))
-        fh.flush()
-        kill_point("write")
+        def write(fh) -> None:
+            out.update(w.finish(fh, header, lambda h: graph_checksum(h, {}, version)))
+            fh.flush()
+            kill_point("write")
 
-    text_size = len(json.dumps(header).encode())
-    if text_size > HEADER_MAX_BYTES:
-        raise ValueError(f"graph header of {text_size} bytes (at most {HEADER_MAX_BYTES})")
-    atomic_write(path, write)
+        text_size = len(json.dumps(header).encode())
+        if text_size > HEADER_MAX_BYTES:
+            raise ValueError(f"graph header of {text_size} bytes (at most {HEADER_MAX_BYTES})")
+        atomic_write(path, write)
     return out
 
 

@@ -93,47 +93,105 @@ def narrow_dtype(a: np.ndarray) -> np.dtype:
     return a.dtype
 
 
-def table_codes(a: np.ndarray, max_values: int = 65535) -> tuple[list[float], np.ndarray] | None:
-    """(values, codes) with a == values[codes] bit for bit, or None when ``a`` (floats) holds more
-    than ``max_values`` distinct values or a value JSON cannot hold (NaN, infinities)."""
-    if len(a) == 0 or not np.isfinite(a).all():
+#: values per piece when an array is encoded, compared or compressed piece by piece
+CHUNK = 1 << 21
+
+
+def chunks(n: int, size: int = CHUNK) -> Iterator[tuple[int, int]]:
+    """[lo, hi) ranges of at most ``size`` covering [0, n)."""
+    for lo in range(0, n, size):
+        yield lo, min(n, lo + size)
+
+
+def table_values(a: np.ndarray, max_values: int = 65535) -> list[float] | None:
+    """The sorted distinct values of float array ``a`` when there are at most ``max_values`` of
+    them and ``values[searchsorted(values, a)] == a`` bit for bit (-0.0 kept apart from 0.0) with
+    values JSON can hold, else None. Read piece by piece: memory is bounded by the values."""
+    if len(a) == 0:
         return None
-    values, codes = np.unique(a, return_inverse=True)
-    if len(values) > max_values:
-        return None
+    values = np.zeros(0, dtype=a.dtype)
+    for lo, hi in chunks(len(a)):
+        c = np.asarray(a[lo:hi])
+        if not np.isfinite(c).all():
+            return None
+        values = np.union1d(values, np.unique(c))
+        if len(values) > max_values:
+            return None
     values_l = [float(v) for v in values]
     if not np.array_equal(np.asarray(values_l, dtype=a.dtype).view(np.uint8), values.view(np.uint8)):
-        return None  # -0.0 and 0.0 merged by unique: keep the bits
-    codes = codes.reshape(-1).astype(np.uint8 if len(values) <= 256 else np.uint16)
-    if not np.array_equal(np.asarray(values_l, dtype=a.dtype)[codes].view(np.uint8), a.view(np.uint8)):
         return None
-    return values_l, codes
+    for lo, hi in chunks(len(a)):
+        c = np.asarray(a[lo:hi])
+        if not np.array_equal(values[np.searchsorted(values, c)].view(np.uint8), c.view(np.uint8)):
+            return None  # -0.0 and 0.0 merged by unique: keep the bits
+    return values_l
+
+
+def table_codes(a: np.ndarray, max_values: int = 65535) -> tuple[list[float], np.ndarray] | None:
+    """(values, codes) with a == values[codes] bit for bit, or None (table_values)."""
+    values = table_values(a, max_values)
+    if values is None:
+        return None
+    v = np.asarray(values, dtype=a.dtype)
+    return values, np.searchsorted(v, a).astype(np.uint8 if len(values) <= 256 else np.uint16)
 
 
 class Writer:
-    """Collects blobs and writes the container (``finish``)."""
+    """Collects blobs and writes the container (``finish``). Blobs are encoded piece by piece
+    (CHUNK values at a time: narrowed, coded, deflated as one zlib stream, CRC-32 updated) into a
+    spool file (an anonymous temporary file in ``spool_dir``, default the system's), which
+    ``finish`` copies behind the index: the writer's memory does not grow with the arrays, which
+    may be memory-mapped files."""
 
-    def __init__(self) -> None:
-        self.parts: list[tuple[bytes | memoryview, int]] = []  # (data, offset relative to the data start)
+    def __init__(self, spool_dir: str | None = None) -> None:
+        import tempfile
+        self.spool = tempfile.TemporaryFile(dir=spool_dir)
         self.pos = 0
 
-    def blob(self, a: np.ndarray, compress: bool) -> dict:
-        a = np.ascontiguousarray(a)
-        dt = dtype_name(a.dtype)
-        a = a.astype(dt, copy=False)
-        raw = memoryview(a).cast("B") if a.nbytes else b""
-        data = zlib.compress(raw, 6) if compress else raw
-        spec = {"offset": self.pos, "nbytes": len(data), "crc32": zlib.crc32(data),
+    def close(self) -> None:
+        self.spool.close()
+
+    def __enter__(self) -> "Writer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def blob(self, a: np.ndarray, compress: bool, dtype=None,
+             transform: Callable[[np.ndarray], np.ndarray] | None = None) -> dict:
+        """Add the values of 1-d ``a`` (after ``transform``, piece by piece) as ``dtype`` (default
+        a's); returns the blob spec (offset relative to the blobs' start)."""
+        a = np.asarray(a).reshape(-1)
+        dt = dtype_name(dtype if dtype is not None else a.dtype)
+        pad = -self.pos % ALIGN              # the padding before a blob (none after the last)
+        self.spool.write(bytes(pad))
+        self.pos += pad
+        z = zlib.compressobj(6) if compress else None
+        crc, nbytes = 0, 0
+        for lo, hi in chunks(len(a)):
+            c = np.asarray(a[lo:hi])
+            if transform is not None:
+                c = transform(c)
+            raw = memoryview(np.ascontiguousarray(c.astype(dt, copy=False))).cast("B")
+            data = z.compress(raw) if z is not None else raw
+            crc = zlib.crc32(data, crc)
+            self.spool.write(data)
+            nbytes += len(data)
+        if z is not None:
+            data = z.flush()
+            crc = zlib.crc32(data, crc)
+            self.spool.write(data)
+            nbytes += len(data)
+        spec = {"offset": self.pos, "nbytes": nbytes, "crc32": crc,
                 "compression": "deflate" if compress else "none", "dtype": dt, "count": int(a.size)}
-        self.parts.append((data, self.pos))
-        self.pos += len(data)
-        self.pos += -self.pos % ALIGN
+        self.pos += nbytes
         return spec
 
     def finish(self, fh, header: dict, seal: Callable[[dict], str], magic: bytes = MAGIC) -> dict:
         """Write ``magic`` (8 bytes), the index and the blobs; returns the index written: ``header``
         with its members' blob offsets made absolute and ``checksum`` = seal(that index) (a string
         of fixed length: the index is laid out with a placeholder of its length first)."""
+        import shutil
         placeholder = seal(header)
         start = 0
         for _ in range(16):  # the index's length depends on the offsets it holds
@@ -147,13 +205,9 @@ class Writer:
         if 16 + len(text) > start:
             raise ValueError("the checksum changed the index's length")
         fh.write(magic + struct.pack("<Q", start - 16) + text + b" " * (start - 16 - len(text)))
-        pos = start
-        for data, rel in self.parts:
-            off = start + rel
-            if off > pos:
-                fh.write(bytes(off - pos))
-            fh.write(data)
-            pos = off + len(data)
+        self.spool.flush()
+        self.spool.seek(0)
+        shutil.copyfileobj(self.spool, fh, 1 << 22)
         return index
 
 
@@ -179,19 +233,19 @@ def encode_raw(w: Writer, a: np.ndarray, copy: bool = False) -> dict:
 
 def encode_ints(w: Writer, a: np.ndarray) -> dict:
     """An integer array, narrowed and deflated."""
-    nd = narrow_dtype(a)
     return {"encoding": "narrow", "dtype": dtype_name(a.dtype), "shape": list(a.shape),
-            "data": w.blob(a.astype(nd), True)}
+            "data": w.blob(a, True, dtype=narrow_dtype(a))}
 
 
 def encode_floats(w: Writer, a: np.ndarray, deflate: bool) -> dict:
     """A float array as a table of its distinct values when it has few, else its values (deflated
     or memory-mapped)."""
-    t = table_codes(a)
-    if t is not None and len(t[0]) <= 4096:
-        values, codes = t
+    values = table_values(a, 4096)
+    if values is not None:
+        v = np.asarray(values, dtype=a.dtype)
         return {"encoding": "table", "dtype": dtype_name(a.dtype), "shape": list(a.shape), "values": values,
-                "data": w.blob(codes, True)}
+                "data": w.blob(a, True, dtype=np.uint8 if len(values) <= 256 else np.uint16,
+                               transform=lambda c: np.searchsorted(v, c))}
     if deflate:
         return {"encoding": "raw", "dtype": dtype_name(a.dtype), "shape": list(a.shape), "data": w.blob(a, True)}
     return encode_raw(w, a)
@@ -205,25 +259,71 @@ def encode_offsets(w: Writer, a: np.ndarray) -> dict | None:
     if len(d) and d.min() < 0:
         return None
     return {"encoding": "offsets", "dtype": dtype_name(a.dtype), "shape": list(a.shape),
-            "data": w.blob(d.astype(narrow_dtype(d)), True)}
+            "data": w.blob(d, True, dtype=narrow_dtype(d))}
+
+
+class DerivedEncoder:
+    """An array stored as a formula of the others, fed piece by piece: ``update(lo, hi, derived)``
+    with the formula's values at [lo, hi) (the pieces in order, covering the array), then
+    ``finish(w)``: the member spec (the positions where the two differ bit for bit as a mask and
+    their values), or None when they differ at more than half the positions. Memory: the mask's
+    bits and the exceptions, never the whole array. ``crc``: record the CRC-32 of ``a``'s bytes,
+    which the reader checks after decoding."""
+
+    def __init__(self, a: np.ndarray, formula: str, crc: bool = False) -> None:
+        self.a, self.formula, self.crc = a, formula, crc
+        self.dt = np.dtype(dtype_name(a.dtype))
+        self.value_crc = 0
+        self.bits: list[np.ndarray] = []    # packed mask bytes
+        self.carry = np.zeros(0, dtype=bool)
+        self.exceptions: list[np.ndarray] = []
+        self.n_exc = 0
+        self.done = 0
+
+    def update(self, lo: int, hi: int, derived: np.ndarray) -> None:
+        if lo != self.done or hi < lo or hi > len(self.a):
+            raise ValueError(f"{self.formula}: pieces must cover the array in order (got [{lo}, {hi}) after {self.done})")
+        a = np.ascontiguousarray(self.a[lo:hi], dtype=self.dt)
+        d = np.ascontiguousarray(np.asarray(derived).astype(self.dt, copy=False))
+        if d.shape != a.shape:
+            raise ValueError(f"{self.formula}: {len(d)} derived values for [{lo}, {hi})")
+        n = hi - lo
+        diff = (a.view(np.uint8).reshape(n, -1) != d.view(np.uint8).reshape(n, -1)).any(axis=1) if n else \
+            np.zeros(0, dtype=bool)
+        if self.crc and n:
+            self.value_crc = zlib.crc32(memoryview(a).cast("B"), self.value_crc)
+        if diff.any():
+            self.exceptions.append(a[diff])
+            self.n_exc += int(diff.sum())
+        diff = np.concatenate([self.carry, diff])
+        whole = len(diff) - len(diff) % 8
+        self.bits.append(np.packbits(diff[:whole]))
+        self.carry = diff[whole:]
+        self.done = hi
+
+    def finish(self, w: Writer) -> dict | None:
+        n = len(self.a)
+        if self.done != n:
+            raise ValueError(f"{self.formula}: pieces cover [0, {self.done}) of {n} values")
+        if self.n_exc > n // 2:
+            return None
+        spec = {"encoding": "derived", "formula": self.formula, "dtype": dtype_name(self.dt), "shape": [n]}
+        if self.crc:
+            spec["crc32"] = self.value_crc
+        if self.n_exc:
+            mask = np.concatenate(self.bits + [np.packbits(self.carry)])
+            spec["mask"] = w.blob(mask, True)
+            spec["data"] = w.blob(np.concatenate(self.exceptions), False)
+        return spec
 
 
 def encode_derived(w: Writer, a: np.ndarray, formula: str, derived: np.ndarray, crc: bool = False) -> dict | None:
     """``a`` as ``formula`` of the other arrays (``derived``: its value) and the values where the
-    two differ bit for bit; None when they differ at more than half the positions. ``crc``: record
-    the CRC-32 of ``a``'s bytes, which the reader checks after decoding."""
-    diff = a.view(np.uint8).reshape(len(a), -1) != derived.astype(a.dtype).view(np.uint8).reshape(len(a), -1)
-    diff = diff.any(axis=1) if len(a) else np.zeros(0, dtype=bool)
-    n_exc = int(diff.sum())
-    if n_exc > len(a) // 2:
-        return None
-    spec = {"encoding": "derived", "formula": formula, "dtype": dtype_name(a.dtype), "shape": list(a.shape)}
-    if crc:
-        spec["crc32"] = value_crc32(a)
-    if n_exc:
-        spec["mask"] = w.blob(np.packbits(diff), True)
-        spec["data"] = w.blob(a[diff], False)
-    return spec
+    two differ bit for bit; None when they differ at more than half the positions (DerivedEncoder
+    in one piece)."""
+    e = DerivedEncoder(a, formula, crc)
+    e.update(0, len(a), derived)
+    return e.finish(w)
 
 
 def value_crc32(a: np.ndarray) -> int:

@@ -14,10 +14,13 @@ order, without the hit tests, and returns:
 - ``swap``: 1 where the other avatar decides next (must equal ``edge_swap``).
 
 The graph file stores these features as this replay (graph file version 4); the writer checks
-every value bit for bit and stores those that differ. The inputs must be in range for the
+every value bit for bit and stores those that differ, shard by shard (``iter_replay``: a run of
+whole states at a time, so that writing never holds the whole edge set's replay). The inputs must be in range for the
 library (``check_inputs``; ``InteractionGraph.load`` validates them too).
 """
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 import numpy as np
 from numba import njit
@@ -170,25 +173,58 @@ def replay_edges(tables: sim.SimTables, arrays, workers: int | None = 1) -> dict
     """REPLAY_COLUMNS and ``swap`` of every edge of ``arrays`` (a graph's arrays, states and
     edges as the file holds them) on ``workers`` threads (None or 0: all cores; the result does
     not depend on it). ValueError when check_inputs finds a problem."""
+    S = len(arrays["state_r"])
+    for _, _, res in iter_replay(tables, arrays, workers, shard_states=max(S, 1)):
+        return res
+    raise AssertionError("iter_replay yields at least one shard")
+
+
+def state_runs(offsets: np.ndarray, edges_per_run: int) -> list[tuple[int, int]]:
+    """Consecutive runs [s0, s1) of whole states covering CSR ``offsets`` (S + 1 values), each cut
+    at the first state boundary past a multiple of ``edges_per_run`` edges; [(0, 0)] for no state."""
+    S = len(offsets) - 1
+    if S <= 0:
+        return [(0, 0)]
+    E = int(offsets[-1])
+    cuts = np.searchsorted(offsets, np.arange(0, E, max(1, int(edges_per_run))), side="right") - 1
+    bounds = sorted(set(np.clip(cuts, 0, S).tolist()) | {0, S})
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+def iter_replay(tables: sim.SimTables, arrays, workers: int | None = 1, shard_edges: int = 1 << 18,
+                shard_states: int | None = None) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
+    """replay_edges shard by shard: (e0, e1, the replay of edges [e0, e1)) for consecutive runs
+    of whole states holding about ``shard_edges`` edges each (or ``shard_states`` states each),
+    in edge order, covering every edge (one empty shard when there is none). Memory: one shard's
+    states and edges at a time. ValueError when check_inputs finds a problem (before any shard)."""
     problem = check_inputs(tables, arrays)
     if problem is not None:
         raise ValueError(problem)
     S = len(arrays["state_r"])
-    si = np.empty((S, sim.N_SI), dtype=np.int64)
-    si[:, sim.SI_MSELF] = arrays["state_m_self"]
-    si[:, sim.SI_MOTHER] = arrays["state_m_other"]
-    si[:, sim.SI_FOTHER] = arrays["state_f_other"]
-    si[:, sim.SI_MASK] = arrays["state_mask_other"]
-    sf = np.empty((S, sim.N_SF), dtype=np.float64)
-    sf[:, sim.SF_R] = arrays["state_r"]
-    sf[:, sim.SF_TH_SELF] = arrays["state_theta_self"]
-    sf[:, sim.SF_TH_OTHER] = arrays["state_theta_other"]
     off = np.asarray(arrays["state_offsets"], dtype=np.int64)
-    action = np.ascontiguousarray(arrays["edge_action"], dtype=np.int64)
-    E = len(action)
-    out = np.empty((E, len(REPLAY_COLUMNS)), dtype=np.float64)
-    swap = np.empty(E, dtype=np.uint8)
-    sim.parallel_for(_replay_range, S, workers, tables.kernel_tuple(), si, sf, off, action, out, swap, min_chunk=256)
-    res = {k: np.ascontiguousarray(out[:, i]) for i, k in enumerate(REPLAY_COLUMNS)}
-    res["swap"] = swap
-    return res
+    if shard_states is not None:
+        bounds = list(range(0, S, max(1, int(shard_states)))) + [S]
+        runs = list(zip(bounds[:-1], bounds[1:])) or [(0, 0)]
+    else:
+        runs = state_runs(off, shard_edges)
+    T = tables.kernel_tuple()
+    for s0, s1 in runs:
+        n = s1 - s0
+        si = np.empty((n, sim.N_SI), dtype=np.int64)
+        si[:, sim.SI_MSELF] = arrays["state_m_self"][s0:s1]
+        si[:, sim.SI_MOTHER] = arrays["state_m_other"][s0:s1]
+        si[:, sim.SI_FOTHER] = arrays["state_f_other"][s0:s1]
+        si[:, sim.SI_MASK] = arrays["state_mask_other"][s0:s1]
+        sf = np.empty((n, sim.N_SF), dtype=np.float64)
+        sf[:, sim.SF_R] = arrays["state_r"][s0:s1]
+        sf[:, sim.SF_TH_SELF] = arrays["state_theta_self"][s0:s1]
+        sf[:, sim.SF_TH_OTHER] = arrays["state_theta_other"][s0:s1]
+        e0, e1 = int(off[s0]), int(off[s1])
+        loc = off[s0:s1 + 1] - e0
+        action = np.ascontiguousarray(arrays["edge_action"][e0:e1], dtype=np.int64)
+        out = np.empty((e1 - e0, len(REPLAY_COLUMNS)), dtype=np.float64)
+        swap = np.empty(e1 - e0, dtype=np.uint8)
+        sim.parallel_for(_replay_range, n, workers, T, si, sf, loc, action, out, swap, min_chunk=256)
+        res = {k: np.ascontiguousarray(out[:, i]) for i, k in enumerate(REPLAY_COLUMNS)}
+        res["swap"] = swap
+        yield e0, e1, res

@@ -31,6 +31,7 @@ files in a checkpoint folder: docs/scaling.md).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Callable, Protocol
 
 import numpy as np
@@ -68,11 +69,12 @@ class Backend(Protocol):
     def link_start(self, ix: tuple, st_si: np.ndarray, st_sf: np.ndarray, tol_r: float, tol_theta: float, f0: int,
                    s_r: float, s_theta: float) -> None: ...
 
-    def link_candidates(self, blocks: list[tuple[np.ndarray, np.ndarray]], max_distance_m: float, tol_r: float,
-                        tol_theta: float, max_candidates: int,
-                        on_block: Callable[[int], None] | None = None) -> list[tuple]: ...
+    def link_candidates(self, blocks: Sequence[tuple[np.ndarray, np.ndarray]], max_distance_m: float, tol_r: float,
+                        tol_theta: float, max_candidates: int, sink: Callable[[int, tuple], None]) -> None:
+        """Each block's (counts, candidates, out of arena) handed to ``sink(k, answer)`` in block
+        order, as they come (``blocks[k]`` is made when it is sent)."""
 
-    def link_features(self, blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    def link_features(self, blocks: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
                       sink: Callable[[int, dict], None]) -> None:
         """Each block's feature columns handed to ``sink(k, columns)`` in block order, as they come."""
 
@@ -129,14 +131,11 @@ class LocalBackend:
     def link_start(self, ix, st_si, st_sf, tol_r, tol_theta, f0, s_r, s_theta) -> None:
         self.worker.link_use_index(ix, st_si, st_sf)
 
-    def link_candidates(self, blocks, max_distance_m, tol_r, tol_theta, max_candidates, on_block=None) -> list:
-        out = []
-        for src, action in blocks:
+    def link_candidates(self, blocks, max_distance_m, tol_r, tol_theta, max_candidates, sink) -> None:
+        for k, (src, action) in enumerate(blocks):
             with self.clock("link_candidates"):
-                out.append(self.worker.link_candidates(src, action, max_distance_m, tol_r, tol_theta, max_candidates))
-            if on_block is not None:
-                on_block(len(out) - 1)
-        return out
+                answer = self.worker.link_candidates(src, action, max_distance_m, tol_r, tol_theta, max_candidates)
+            sink(k, answer)
 
     def link_features(self, blocks, sink) -> None:
         for k, (src, action, tgt) in enumerate(blocks):

@@ -49,13 +49,26 @@ def _candidates(ix, G, cf, valid, tol_r, tol_t, cand, cnt, lo, hi):
             cnt[l] = spatial.index_search(ix, G[l], cf[l, 0], cf[l, 1], cf[l, 2], tol_r, tol_t, True, cand[l], d)
 
 
+def prune_dead_ends(n_states: int, loff: np.ndarray, off: np.ndarray, cand: np.ndarray,
+                    enabled: bool) -> tuple[np.ndarray, int]:
+    """(alive (S,) bool, states removed by the cascade after the first wave): the greatest set of
+    states in which every state keeps an edge into the set. loff (S+1,): each state's landings;
+    off (L+1,), cand: each landing's candidate states. The kernel's index buffers are int32
+    where the counts allow (4 bytes per landing twice and per candidate once)."""
+    L, C = len(off) - 1, len(cand)
+    if C and (int(np.min(cand)) < 0 or int(np.max(cand)) >= n_states):
+        raise ValueError("prune_dead_ends: a candidate outside the states")
+    small = np.int32 if max(L, C, n_states) < np.iinfo(np.int32).max else np.int64
+    alive_c = np.empty(L, dtype=small)
+    src = np.empty(L, dtype=small)
+    rl = np.empty(C if enabled else 0, dtype=small)
+    return _prune(n_states, loff, off, cand, enabled, alive_c, src, rl)
+
+
 @njit(cache=True)
-def _prune(n_states, loff, off, cand, enabled):
-    """Greatest set of states in which every state keeps an edge into the set. loff (S+1,):
-    each state's landings; off (L+1,), cand: each landing's candidate states."""
+def _prune(n_states, loff, off, cand, enabled, alive_c, src, rl):
+    """prune_dead_ends' kernel (alive_c, src: (L,) buffers, rl: (C,) buffer)."""
     L = len(off) - 1
-    alive_c = np.empty(L, dtype=np.int64)
-    src = np.empty(L, dtype=np.int64)
     for s in range(n_states):
         for l in range(loff[s], loff[s + 1]):
             src[l] = s
@@ -71,7 +84,6 @@ def _prune(n_states, loff, off, cand, enabled):
     for i in range(len(cand)):
         rcount[cand[i] + 1] += 1
     roff = np.cumsum(rcount)
-    rl = np.empty(len(cand), dtype=np.int64)
     fill = roff[:-1].copy()
     for l in range(L):
         for i in range(off[l], off[l + 1]):
@@ -174,6 +186,37 @@ def edge_features(T: tuple, st_si: np.ndarray, st_sf: np.ndarray, src: np.ndarra
     return out
 
 
+class MenuBlocks:
+    """The first linking pass's blocks, made when asked for: block k is (src, action) of every menu
+    action of the states in ``spans[k]`` (the whole list is never held)."""
+
+    def __init__(self, tables: SimTables, m_self: np.ndarray, spans: list[tuple[int, int]]) -> None:
+        self.tables, self.m, self.spans = tables, m_self, spans
+
+    def __len__(self) -> int:
+        return len(self.spans)
+
+    def __getitem__(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        b, e = self.spans[k]
+        src, action = menu_rows(self.tables, self.m[b:e])
+        return src + b, action
+
+    def __iter__(self):
+        return (self[k] for k in range(len(self)))
+
+
+def candidate_offsets(counts: np.ndarray, out: np.ndarray) -> None:
+    """out[0] = 0, out[1:] = cumsum(counts), piece by piece (no temporary as long as counts)."""
+    from igraph_fight.graph_compact import chunks
+    out[0] = 0
+    run = 0
+    for lo, hi in chunks(len(counts)):
+        c = np.cumsum(np.asarray(counts[lo:hi]), dtype=np.int64)
+        c += run
+        out[lo + 1:hi + 1] = c
+        run = int(c[-1]) if len(c) else run
+
+
 def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r: float, tol_theta: float,
          max_distance_m: float, prune: bool = True, s_r: float = 0.5, s_theta: float = np.pi / 6,
          max_candidates: int = 8, block: int = 20_000, progress: bool = False, workers: int = 1,
@@ -183,11 +226,18 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
     Each landing keeps its ``max_candidates`` nearest states within tolerance (nearest first): it
     links to the first that survives pruning. Two passes keep memory small: the first keeps only
     the candidates, the second re-simulates the landings that keep an edge (deterministic, hence
-    identical) for their features, in blocks of states, each block written into columns allocated
-    once at the final edge count (igraph_fight.build.columns; files mapped into memory under
-    ``spill_dir`` when given, else arrays). The simulations run on ``backend``
+    identical) for their features, in blocks of states. Every per-landing and per-edge column (the
+    candidates and their counts, the surviving edges, their features) is written block by block
+    as the answers arrive (igraph_fight.build.columns: files mapped into memory under
+    ``spill_dir`` when given, else arrays); the blocks sent out are made when sent. What this
+    process holds besides: the states, the pruning's reverse index (4 bytes per landing twice and
+    per candidate once: prune_dead_ends) and one block. The simulations run on ``backend``
     (igraph_fight.build.backend; None: this process on ``workers`` threads); pruning runs here.
     """
+    import shutil
+    from pathlib import Path
+
+    from igraph_fight.graph_replay import state_runs
     S = len(st_si)
     K = int(max_candidates)
     T = tables.kernel_tuple()
@@ -212,31 +262,43 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
         if bar is not None:
             bar.update(spans[k][1] - spans[k][0])
 
-    blocks = []
-    for b, e in spans:
-        src, action = menu_rows(tables, m[b:e])
-        blocks.append((src + b, action))
+    cdir = Path(spill_dir) / "candidates" if spill_dir is not None else None
+    cstore = ColumnStore(cdir)
+    counts_col = cstore.appender("counts", np.int32)
+    cand_col = cstore.appender("cand", np.int32)
+    n_out = [0]
+
+    def take(k: int, answer: tuple) -> None:
+        counts_col.append(answer[0])
+        cand_col.append(answer[1])
+        n_out[0] += int(answer[2])
+        tick(k)
+
+    blocks = MenuBlocks(tables, m, spans)
     if backend is None:
-        answers = []
         for k, (src, action) in enumerate(blocks):
-            answers.append(landing_candidates(T, tables.nextset, ix, st_si, st_sf, src, action, max_distance_m, tol_r,
-                                              tol_theta, K, workers))
-            tick(k)
+            take(k, landing_candidates(T, tables.nextset, ix, st_si, st_sf, src, action, max_distance_m, tol_r,
+                                       tol_theta, K, workers))
     else:
-        answers = backend.link_candidates(blocks, max_distance_m, tol_r, tol_theta, K, on_block=tick)
-    del blocks
-    counts = np.concatenate([a[0] for a in answers]).astype(np.int64) if answers else np.zeros(0, np.int64)
-    n_out = int(sum(a[2] for a in answers))
-    cand = np.concatenate([a[1] for a in answers]).astype(np.int64) if answers else np.zeros(0, dtype=np.int64)
-    del answers
-    off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    linked_before = int(np.sum(counts > 0))
-    # linked edges per state (reduceat mishandles empty segments: use a cumulative sum)
-    linked_cum = np.concatenate([[0], np.cumsum(counts > 0)])
-    dead_before = float(np.mean(linked_cum[loff[1:]] - linked_cum[loff[:-1]] == 0)) if S and L else 1.0
-    alive, cascaded = _prune(S, loff, off, cand, prune)
+        backend.link_candidates(blocks, max_distance_m, tol_r, tol_theta, K, sink=take)
+    ostore = ColumnStore(cdir)
+    off = ostore.new("off", L + 1, np.int64)
+    cc = cstore.finish()
+    counts, cand = np.asarray(cc["counts"]), np.asarray(cc["cand"])
+    candidate_offsets(counts, off)
+    off = np.asarray(ostore.finish()["off"])
+    linked_before, dead = 0, 0
+    for s0, s1 in state_runs(loff, 1 << 21):  # linked landings per state, a run of states at a time
+        l0, l1 = int(loff[s0]), int(loff[s1])
+        cum = np.concatenate([[0], np.cumsum(counts[l0:l1] > 0)])
+        linked_before += int(cum[-1])
+        dead += int(np.sum(cum[loff[s0 + 1:s1 + 1] - l0] - cum[loff[s0:s1] - l0] == 0))
+    dead_before = float(dead / S) if S and L else 1.0
+    alive, cascaded = prune_dead_ends(S, loff, off, cand, prune)
     # second pass, in blocks of states: landings of surviving states with a surviving candidate
-    picked = []
+    store = ColumnStore(spill_dir)
+    ids = [store.appender(name, np.int64) for name in ("src", "action", "target")]
+    starts = [0]
     for b, e in spans:
         rows = np.arange(loff[b], loff[e])
         src = np.repeat(np.arange(b, e, dtype=np.int64), np.diff(loff[b:e + 1]))
@@ -245,19 +307,15 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
         tgt = _first_alive(off, cand, alive, rows)
         keep = tgt >= 0
         rows, src, tgt = rows[keep], src[keep], tgt[keep]
-        picked.append((src, tables.next_ids[no[m[src]] + rows - loff[src]], tgt))
-    del cand, off, counts
-    starts = np.concatenate([[0], np.cumsum([len(p[0]) for p in picked])]).astype(np.int64)
+        for col, x in zip(ids, (src, tables.next_ids[no[m[src]] + rows - loff[src]], tgt)):
+            col.append(x)
+        starts.append(starts[-1] + len(src))
+    del cand, off, counts, cc
+    if cdir is not None:
+        shutil.rmtree(cdir, ignore_errors=True)
     E = int(starts[-1])
-    store = ColumnStore(spill_dir)
-    ids = [store.new(name, E, np.int64) for name in ("src", "action", "target")]
-    blocks = []
-    for k, p in enumerate(picked):
-        lo, hi = starts[k], starts[k + 1]
-        for col, x in zip(ids, p):
-            col[lo:hi] = x
-        blocks.append(tuple(np.asarray(col[lo:hi]) for col in ids))
-    del picked
+    id_cols = [np.asarray(col.finish()) for col in ids]
+    fblocks = [tuple(col[starts[k]:starts[k + 1]] for col in id_cols) for k in range(len(spans))]
     swap = store.new("swap", E, np.int8)
     feat = {name: store.new(name, E, np.float64) for name in (*FEATURE_COLUMNS, "snap_r", "snap_theta")}
 
@@ -269,17 +327,17 @@ def link(tables: SimTables, st_si: np.ndarray, st_sf: np.ndarray, f0: int, tol_r
         tick(k)
 
     if backend is None:
-        for k, (src, action, tgt) in enumerate(blocks):
+        for k, (src, action, tgt) in enumerate(fblocks):
             sink(k, edge_features(T, st_si, st_sf, src, action, tgt, workers))
     else:
-        backend.link_features(blocks, sink)
+        backend.link_features(fblocks, sink)
         backend.link_stop()
-    del blocks, ids, swap, feat
+    del fblocks, id_cols, ids
     if bar is not None:
         bar.close()
     cat = store.finish()
     stats = {"landings": L, "landings_linked_before_pruning": linked_before,
              "dead_end_fraction_before_pruning": dead_before, "pruned_by_cascade": int(cascaded),
-             "out_of_arena_fraction": float(n_out / L) if L else 0.0}
+             "out_of_arena_fraction": float(n_out[0] / L) if L else 0.0}
     cols = {k: cat[k] for k in (*FEATURE_COLUMNS, "snap_r", "snap_theta")}
     return Edges(cat["src"], cat["action"], cat["target"], cat["swap"], cols, alive, stats)

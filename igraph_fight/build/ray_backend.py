@@ -22,6 +22,10 @@ from igraph_fight.build.stages import OpClock, StageWorker, cluster_in_shards, c
 from igraph_fight.sim import SimTables
 
 
+#: blocks in flight per actor while linking (one computing, one queued)
+IN_FLIGHT = 2
+
+
 class RayStageWorker(StageWorker):
     """A StageWorker in a Ray actor (its numba kernels single-threaded: one CPU per actor)."""
 
@@ -127,29 +131,29 @@ class RayBackend:
         a_ref, b_ref = ray.put(np.ascontiguousarray(st_si)), ray.put(np.ascontiguousarray(st_sf))
         ray.get([a.link_new_index.remote(a_ref, b_ref, tol_r, tol_theta, f0, s_r, s_theta) for a in self.actors])
 
-    def link_candidates(self, blocks, max_distance_m, tol_r, tol_theta, max_candidates, on_block=None) -> list:
-        return self._blocks("link_candidates", [(lambda a, b=b: a.link_candidates.remote(b[0], b[1], max_distance_m, tol_r, tol_theta,
-                                                                       max_candidates)) for b in blocks], on_block)
+    def link_candidates(self, blocks, max_distance_m, tol_r, tol_theta, max_candidates, sink) -> None:
+        with self.clock("link_candidates"):
+            self._windowed(len(blocks), lambda k: (lambda a, b=blocks[k]: a.link_candidates.remote(
+                b[0], b[1], max_distance_m, tol_r, tol_theta, max_candidates)), sink)
 
     def link_features(self, blocks, sink) -> None:
-        calls = [(lambda a, b=b: a.link_features.remote(b[0], b[1], b[2])) for b in blocks]
         with self.clock("link_features"):
-            refs = [self._call(k, call) for k, call in enumerate(calls)]
-            for k in range(len(refs)):
-                cols = self.ray.get(refs[k])
-                refs[k] = None  # the driver's copy of the answer goes once the sink has it
-                sink(k, cols)
+            self._windowed(len(blocks), lambda k: (lambda a, b=blocks[k]: a.link_features.remote(b[0], b[1], b[2])),
+                           sink)
 
-    def _blocks(self, name: str, calls: list[Callable], on_block: Callable[[int], None] | None) -> list:
-        """Each block to the actors in turn, answers taken in block order."""
-        with self.clock(name):
-            refs = [self._call(k, call) for k, call in enumerate(calls)]
-            out = []
-            for k, r in enumerate(refs):
-                out.append(self.ray.get(r))
-                if on_block is not None:
-                    on_block(k)
-            return out
+    def _windowed(self, n: int, call_of: Callable[[int], Callable], sink: Callable[[int, object], None]) -> None:
+        """Blocks 0..n-1 to the actors in turn, at most IN_FLIGHT per actor at once (a block is
+        made, sent, and its answer handed to ``sink(k, answer)`` in block order, then dropped):
+        the driver and the object store hold a window of blocks, not all of them."""
+        from collections import deque
+        window = IN_FLIGHT * len(self.actors)
+        pending: deque = deque()
+        for k in range(n):
+            pending.append((k, self._call(k, call_of(k))))
+            while len(pending) >= window or (k == n - 1 and pending):
+                j, ref = pending.popleft()
+                sink(j, self.ray.get(ref))
+                del ref
 
     def link_stop(self) -> None:
         self.ray.get([a.link_release.remote() for a in self.actors])

@@ -12,9 +12,8 @@ from typing import Callable
 
 import numpy as np
 
-from igraph_fight import sim
 from igraph_fight.build import spatial
-from igraph_fight.sim import SF_R, SimTables
+from igraph_fight.sim import SimTables
 
 RAY_INSTALL_HINT = "the Ray backend needs Ray: pip install 'igraph-fight[ray]'"
 

@@ -4,7 +4,7 @@ tables, cached per-action references) and per-fighter state (FighterState: the o
 buffer, planned action segments, falls, hits, rewards). The bout itself: tracker.bouts.physics_bout."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -89,11 +89,12 @@ class BoutSetup:
 
     @classmethod
     def create(cls, library, physics_hz: float = 240.0, sim_params=None, root_assist: bool = False,
-               tracker=None) -> "BoutSetup":
+               tracker=None, reward=None) -> "BoutSetup":
         """root_assist: hold each pelvis on its reference with a weld (ModelOptions.root_assist):
         NOT physics (a fighter cannot fall), a labelled diagnostic only. ``tracker``: a batched
         tracker (``batched`` true: the assisted tracker, PDTracker) gets the batched environment at
-        its physics rate with its assist and grounded per-action references."""
+        its physics rate with its assist and grounded per-action references; ``reward``: that env's
+        tracker.track.batch_env.RewardWeights (a trainer's; default the env's)."""
         from igraph_fight.game import FightGame, GameConfig
         from igraph_fight.sim import SimParams, SimTables
 
@@ -114,7 +115,8 @@ class BoutSetup:
             hz = float(getattr(tracker, "physics_hz", 120.0))
             from tracker.track.pd import batched_model_options
             scene = build_fighter_scene(spec, 2, batched_model_options(hz))
-            env = BoutEnv(scene, BatchConfig(assist=tracker.assist_config()))
+            bcfg = BatchConfig(assist=tracker.assist_config())
+            env = BoutEnv(scene, bcfg if reward is None else replace(bcfg, reward=reward))
             return cls(library, scene, env, 0.0, tables, game, False, True)
         scene = build_fighter_scene(spec, 2, ModelOptions(physics_hz=physics_hz, root_assist=root_assist))
         env = TrackingEnv(scene, EnvConfig(terminate_on_fall=False))

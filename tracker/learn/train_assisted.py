@@ -18,7 +18,9 @@ Read top to bottom:
    on it, plus the network's output), so the first episodes already stand; reward = the env's
    tracking terms times exp(-``assist_penalty`` * (|F|/mg + |tau|/(mg m))): positive, so staying up
    always pays, and larger the less the assist does, which teaches the policy to shrink the assist
-   where the body's own contacts can carry it.
+   where the body's own contacts can carry it. ``root_xy_weight`` prices the pelvis's horizontal
+   distance to its reference in the root term (1/m^2; the body lagging its reference is what makes
+   a bout's planned punch fall short).
 4. ``update``: PPO with the shared helper (igraph_fight.learn.ppo: GAE, clipped surrogate).
 5. The cap curriculum: from ``cap_start`` the assist cap is multiplied by ``cap_decay`` each time
    the completion of the last ``curriculum_window`` episodes is at least ``curriculum_completion``,
@@ -72,6 +74,7 @@ class AssistedTrainConfig:
     max_grad_norm: float = 1.0
     target_kl: float = 0.03
     assist_penalty: float = 2.0
+    root_xy_weight: float = 2.0
     cap_start: float = 0.5
     cap_min: float = 0.05
     cap_decay: float = 0.9
@@ -90,6 +93,12 @@ class AssistedTrainConfig:
             if k in known:
                 kw[k] = tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list) else v
         return cls(**kw)
+
+
+def reward_weights(cfg: AssistedTrainConfig):
+    """The batched env's reward weights of a run (its assist penalty and root-position weight)."""
+    from tracker.track.batch_env import RewardWeights
+    return RewardWeights(assist_penalty=cfg.assist_penalty, root_xy=cfg.root_xy_weight)
 
 
 def assisted_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):
@@ -152,7 +161,7 @@ class Rollouts:
 
     def __init__(self, cfg: AssistedTrainConfig, library, seed: int) -> None:
         from tracker.track.assist import AssistConfig
-        from tracker.track.batch_env import BatchConfig, BatchEnv, RewardWeights
+        from tracker.track.batch_env import BatchConfig, BatchEnv
         from tracker.track.evaluation import make_setup
         from tracker.track.pd import PDTracker, batched_model_options
         from tracker.track.walks import LibraryWalks
@@ -162,7 +171,7 @@ class Rollouts:
         self.setup = make_setup(self.src, batched_model_options(cfg.physics_hz))
         self.cap = cfg.cap_start
         self.bcfg = BatchConfig(init_noise=cfg.init_noise, assist=AssistConfig("learned", cap=self.cap),
-                                reward=RewardWeights(assist_penalty=cfg.assist_penalty))
+                                reward=reward_weights(cfg))
         self.env = BatchEnv(self.setup.scene, cfg.n_envs, self.bcfg)
         PDTracker(class_scale=cfg.class_scale).reset(self.env)
         self.pool = [self._new_ref() for _ in range(cfg.pool_walks)]

@@ -38,7 +38,8 @@ import numpy as np
 
 from igraph_fight.learn.ppo import gae
 from tracker.learn.train_assisted import (
-    AssistedTrainConfig, Rollouts, RunningNorm, assisted_nets, collect_walks, plain_config, ppo_update)
+    AssistedTrainConfig, Rollouts, RunningNorm, assisted_nets, collect_walks, plain_config, ppo_update,
+    reward_weights)
 from tracker.track.assisted_policy import FORMAT, N_ASSIST, VERSION, actor_layers, mlp_forward
 
 
@@ -179,7 +180,7 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
     budget["runs"] += 1
     cap = float(prior["cap"])
     sampler = SamplingTracker(0, cap, cfg, bout_cfg.noise_seed * 1000 + budget["runs"])
-    setup = BoutSetup.create(lib, sim_params=g.sim_params(), tracker=sampler)
+    setup = BoutSetup.create(lib, sim_params=g.sim_params(), tracker=sampler, reward=reward_weights(cfg))
     sampler.n_act = setup.env.batch.n_act
     obs_dim = int(np.asarray(prior["obs_mean"]).shape[0])
     act_dim = sampler.n_act + N_ASSIST

@@ -50,6 +50,9 @@ class RewardWeights:
     end_effector: float = 0.15
     root: float = 0.2
     com: float = 0.1
+    #: weight (1/m^2) of the pelvis's horizontal distance to its reference inside the root term's
+    #: exponent (20 dz^2 + 5 (1 - up.up_ref) + 2 (1 - cos dyaw) + root_xy dxy^2)
+    root_xy: float = 2.0
     #: reward *= exp(-assist_penalty * (|F| / mg + |tau| / (mg m))): always positive (staying up pays),
     #: smaller the more the assist does
     assist_penalty: float = 2.0
@@ -595,7 +598,8 @@ class BatchEnv:
         dp = self.qpos[:, :3] - qp[:, :3]
         dyaw = wrap_angle(yaw - self._table_rows("yaw", 0))
         up_dot = (self.R[:, 2, :] * self._table_rows("up", 0)).sum(axis=1)
-        root_err = 20.0 * dp[:, 2] ** 2 + 5.0 * (1.0 - up_dot) + 2.0 * (1.0 - np.cos(dyaw)) + 2.0 * (dp[:, :2] ** 2).sum(1)
+        root_err = (20.0 * dp[:, 2] ** 2 + 5.0 * (1.0 - up_dot) + 2.0 * (1.0 - np.cos(dyaw))
+                    + w.root_xy * (dp[:, :2] ** 2).sum(1))
         dc = self.com_vel - self._table_rows("com_vel", 0)
         com_err = (dc * dc).sum(axis=1)
         r = (w.pose * np.exp(-2.0 * pose_err) + w.velocity * np.exp(-0.1 * vel_err) + w.end_effector

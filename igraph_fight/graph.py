@@ -219,7 +219,7 @@ def replayed_shards(arrays, header: dict, library=None, workers: int | None = 1,
     S = len(s_r)
 
     def shards():
-        for e0, e1, r in iter_replay(tables, arrays, workers, shard_edges=shard_edges):
+        for e0, e1, r in iter_replay(tables, arrays, workers, shard_edges=shard_edges, checked=True):
             t = np.asarray(arrays["edge_target"][e0:e1])
             if len(t) and (t.min() < 0 or t.max() >= S):
                 raise ReplayRefused("edge_target: a state outside the graph")
@@ -1101,8 +1101,9 @@ def _encode_formula(w: "gc.Writer", arrays: dict[str, np.ndarray], k: str) -> di
     the arrays do not fit together, as in crafted files, or too many values differ)."""
     a = arrays[k]
     e = gc.DerivedEncoder(a, k)
-    for lo, hi in gc.chunks(len(a)):
-        part = {n: (arrays[n][lo:hi] if n in EDGE_ARRAYS else arrays[n]) for n in ALL_ARRAYS}
+    part = {n: arrays[n] for n in ALL_ARRAYS if n not in EDGE_ARRAYS}  # the state arrays, whole
+    for lo, hi in gc.chunks(len(a), w.chunk):
+        part.update({n: arrays[n][lo:hi] for n in EDGE_ARRAYS})
         try:
             with np.errstate(all="ignore"):
                 derived = DERIVED[k](part)
@@ -1115,29 +1116,30 @@ def _encode_formula(w: "gc.Writer", arrays: dict[str, np.ndarray], k: str) -> di
 
 
 def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray], version: int = VERSION,
-                  library=None) -> dict:
+                  library=None, chunk: int = gc.CHUNK, shard_edges: int = 1 << 18) -> dict:
     """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a compact file of ``version``
     (3 or 4), atomically, without validating them; returns the index written (the header with
     ``members`` and ``checksum``). Version 4 replays the edges with ``library`` (default: the
     embedded one) where it can (replayed_shards). The arrays may be memory-mapped files: they are
     read piece by piece, the blobs spooled to a temporary file beside ``path`` and copied behind
-    the index, so that memory does not grow with the edges (docs/scaling.md). ``save`` is the way
-    to write a graph; this is what it calls."""
+    the index, so that memory does not grow with the edges (docs/scaling.md): ``chunk`` values
+    per piece, ``shard_edges`` edges per replay shard (the file does not depend on either).
+    ``save`` is the way to write a graph; this is what it calls."""
     if version not in COMPACT_VERSIONS:
         raise ValueError(f"compact graph files are versions {COMPACT_VERSIONS}, not {version!r}")
     replay = None
     if version >= 4 and ("library_npz" in arrays or library is not None):
-        replay = replayed_shards(arrays, header, library)
+        replay = replayed_shards(arrays, header, library, shard_edges=shard_edges)
         replay = None if isinstance(replay, str) else replay
     try:
-        return _write_compact(path, header, arrays, version, replay)
+        return _write_compact(path, header, arrays, version, replay, chunk)
     except ReplayRefused:  # a shard the replay refused: the arrays stored as they are
-        return _write_compact(path, header, arrays, version, None)
+        return _write_compact(path, header, arrays, version, None, chunk)
 
 
-def _write_compact(path, header: dict, arrays: dict[str, np.ndarray], version: int, replay) -> dict:
+def _write_compact(path, header: dict, arrays: dict[str, np.ndarray], version: int, replay, chunk: int) -> dict:
     out: dict = {}
-    with gc.Writer(spool_dir=os.path.dirname(os.path.abspath(path))) as w:
+    with gc.Writer(spool_dir=os.path.dirname(os.path.abspath(path)), chunk=chunk) as w:
         header = {**{k: v for k, v in header.items() if k not in ("checksum", "members", "path")}, "version": version,
                   "members": compact_members(w, arrays, replay)}
 

@@ -141,12 +141,15 @@ class Writer:
     (CHUNK values at a time: narrowed, coded, deflated as one zlib stream, CRC-32 updated) into a
     spool file (an anonymous temporary file in ``spool_dir``, default the system's), which
     ``finish`` copies behind the index: the writer's memory does not grow with the arrays, which
-    may be memory-mapped files."""
+    may be memory-mapped files. ``chunk``: values per piece (the file does not depend on it)."""
 
-    def __init__(self, spool_dir: str | None = None) -> None:
+    def __init__(self, spool_dir: str | None = None, chunk: int = CHUNK) -> None:
         import tempfile
+        if chunk < 1:
+            raise ValueError(f"chunk must be at least 1 value, not {chunk}")
         self.spool = tempfile.TemporaryFile(dir=spool_dir)
         self.pos = 0
+        self.chunk = int(chunk)
 
     def close(self) -> None:
         self.spool.close()
@@ -168,7 +171,7 @@ class Writer:
         self.pos += pad
         z = zlib.compressobj(6) if compress else None
         crc, nbytes = 0, 0
-        for lo, hi in chunks(len(a)):
+        for lo, hi in chunks(len(a), self.chunk):
             c = np.asarray(a[lo:hi])
             if transform is not None:
                 c = transform(c)

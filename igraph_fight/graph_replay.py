@@ -192,12 +192,14 @@ def state_runs(offsets: np.ndarray, edges_per_run: int) -> list[tuple[int, int]]
 
 
 def iter_replay(tables: sim.SimTables, arrays, workers: int | None = 1, shard_edges: int = 1 << 18,
-                shard_states: int | None = None) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
+                shard_states: int | None = None,
+                checked: bool = False) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
     """replay_edges shard by shard: (e0, e1, the replay of edges [e0, e1)) for consecutive runs
     of whole states holding about ``shard_edges`` edges each (or ``shard_states`` states each),
     in edge order, covering every edge (one empty shard when there is none). Memory: one shard's
-    states and edges at a time. ValueError when check_inputs finds a problem (before any shard)."""
-    problem = check_inputs(tables, arrays)
+    states and edges at a time. ValueError when check_inputs finds a problem (before any shard;
+    ``checked``: the caller has run check_inputs on these tables and arrays already)."""
+    problem = None if checked else check_inputs(tables, arrays)
     if problem is not None:
         raise ValueError(problem)
     S = len(arrays["state_r"])

@@ -93,18 +93,15 @@ class Appender:
     def __len__(self) -> int:
         return self.n
 
-    def _append(self, x: np.ndarray) -> None:
+    def append(self, x: np.ndarray) -> None:
+        if self.result is not None:
+            raise ValueError("an appender takes no block once finished")
         x = np.ascontiguousarray(x, dtype=self.dtype).reshape(-1)
         if self.fh is not None:
             self.fh.write(memoryview(x).cast("B"))
         else:
             self.blocks.append(x)
         self.n += len(x)
-
-    def append(self, x: np.ndarray) -> None:
-        if self.result is not None:
-            raise ValueError("an appender takes no block once finished")
-        self._append(x)
 
     def finish(self) -> np.ndarray:
         """The column, read-only (the same array when called again)."""

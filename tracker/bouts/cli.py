@@ -32,6 +32,7 @@ FIGHTER_HELP = ("style, STYLE+phys[:MODEL] (physically measured hit odds, tracke
                 "STYLE+close[=R,THETA][:avoid=A,B,...] (closes in by a geometric rule until engaged within R m "
                 "and THETA rad, never launching the avoided library actions: igraph_fight.closing), both, or "
                 "rl[:CKPT] for the physics RL baseline")
+ROOT_ASSIST_HELP = "diagnostic, NOT physics: hold the pelvises on the references"
 FACING_HELP = ("which way a fallen fighter faces when it gets up: towards the opponent (default) or its "
                "fighting direction when the fall was detected")
 RESET_HELP = ("where a fallen fighter gets up: on its reference pelvis (default; the topple undone) or where "
@@ -123,7 +124,7 @@ def add_fight_arguments(f: argparse.ArgumentParser, tracker_help: str = TRACKER_
     f.add_argument("--tracker", default=None, help=tracker_help)
     f.add_argument("--no-video", dest="video", action="store_false", default=True)
     f.add_argument("--video-fps", type=positive_float, default=15.0)
-    f.add_argument("--root-assist", action="store_true", help="diagnostic, NOT physics: hold the pelvises on the references")
+    f.add_argument("--root-assist", action="store_true", help=ROOT_ASSIST_HELP)
     f.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     f.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
     f.add_argument("--max-wall-s", type=positive_float, default=None,
@@ -134,16 +135,17 @@ def add_fight_arguments(f: argparse.ArgumentParser, tracker_help: str = TRACKER_
 
 def add_series_arguments(r: argparse.ArgumentParser, tracker_help: str = TRACKER_HELP) -> None:
     """Options of `tracker bouts series` (N physics bouts between two agents, aggregated)."""
-    r.add_argument("--graph", required=True)
-    r.add_argument("--a", default="infighter", help=FIGHTER_HELP)
-    r.add_argument("--b", default="outboxer")
-    r.add_argument("--depth-a", type=depth, default=5)
-    r.add_argument("--depth-b", type=depth, default=5)
-    r.add_argument("--bouts", type=positive_int, default=10)
-    r.add_argument("--seconds", type=positive_float, default=60.0)
-    r.add_argument("--seed0", type=non_negative_int, default=0)
+    r.add_argument("--graph", required=True, help="interaction graph file (.igz) the planner fighters use")
+    r.add_argument("--a", default="infighter", help="fighter A (default infighter): " + FIGHTER_HELP)
+    r.add_argument("--b", default="outboxer", help="fighter B (default outboxer), as --a")
+    r.add_argument("--depth-a", type=depth, default=5, help="A's min-max search depth (default 5)")
+    r.add_argument("--depth-b", type=depth, default=5, help="B's min-max search depth (default 5)")
+    r.add_argument("--bouts", type=positive_int, default=10, help="number of bouts (default 10)")
+    r.add_argument("--seconds", type=positive_float, default=60.0, help="seconds per bout (default 60)")
+    r.add_argument("--seed0", type=non_negative_int, default=0,
+                   help="first bout's seed (bouts use seed0, seed0+1, ...; default 0)")
     r.add_argument("--tracker", default=None, help=tracker_help)
-    r.add_argument("--root-assist", action="store_true")
+    r.add_argument("--root-assist", action="store_true", help=ROOT_ASSIST_HELP)
     r.add_argument("--reset-place", choices=("reference", "fall"), default="reference", help=RESET_HELP)
     r.add_argument("--reset-facing", choices=("fall", "opponent"), default="opponent", help=FACING_HELP)
     r.add_argument("--out", default=None, help="write the result (with every bout's summary) as JSON")
@@ -246,7 +248,7 @@ def add_rl_eval_arguments(e: argparse.ArgumentParser, tracker_help: str = TRACKE
     e.add_argument("--future", default="calibrated",
                    help=f"with --hit-model: the later plies' values (tracker.bouts.hit_model.phys_fighter): {FUTURE_HELP}")
     e.add_argument("--workers", type=positive_int, default=1, help="processes playing the bouts (same results)")
-    e.add_argument("--root-assist", action="store_true")
+    e.add_argument("--root-assist", action="store_true", help=ROOT_ASSIST_HELP)
     e.add_argument("--out", default=None, help="write the result as JSON")
 
 

@@ -20,7 +20,9 @@ Read top to bottom:
    always pays, and larger the less the assist does, which teaches the policy to shrink the assist
    where the body's own contacts can carry it. ``root_xy_weight`` prices the pelvis's horizontal
    distance to its reference in the root term (1/m^2; the body lagging its reference is what makes
-   a bout's planned punch fall short).
+   a bout's planned punch fall short); ``end_effector_weight`` and ``end_effector_scale`` (1/m^2)
+   set the hands-and-feet term (a smaller scale still rewards hands 10-20 cm off, where the
+   default's exponent has gone flat).
 4. ``update``: PPO with the shared helper (igraph_fight.learn.ppo: GAE, clipped surrogate).
 5. The cap curriculum: from ``cap_start`` the assist cap is multiplied by ``cap_decay`` each time
    the completion of the last ``curriculum_window`` episodes is at least ``curriculum_completion``,
@@ -75,6 +77,8 @@ class AssistedTrainConfig:
     target_kl: float = 0.03
     assist_penalty: float = 2.0
     root_xy_weight: float = 2.0
+    end_effector_weight: float = 0.15
+    end_effector_scale: float = 40.0
     cap_start: float = 0.5
     cap_min: float = 0.05
     cap_decay: float = 0.9
@@ -96,9 +100,11 @@ class AssistedTrainConfig:
 
 
 def reward_weights(cfg: AssistedTrainConfig):
-    """The batched env's reward weights of a run (its assist penalty and root-position weight)."""
+    """The batched env's reward weights of a run (its assist penalty, root-position weight and
+    end-effector term)."""
     from tracker.track.batch_env import RewardWeights
-    return RewardWeights(assist_penalty=cfg.assist_penalty, root_xy=cfg.root_xy_weight)
+    return RewardWeights(assist_penalty=cfg.assist_penalty, root_xy=cfg.root_xy_weight,
+                         end_effector=cfg.end_effector_weight, ee_scale=cfg.end_effector_scale)
 
 
 def assisted_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):

@@ -48,6 +48,9 @@ class RewardWeights:
     pose: float = 0.5
     velocity: float = 0.05
     end_effector: float = 0.15
+    #: scale (1/m^2) of the end-effector term's exponent: exp(-ee_scale * sum of squared hand and
+    #: foot position errors in the facing frame)
+    ee_scale: float = 40.0
     root: float = 0.2
     com: float = 0.1
     #: weight (1/m^2) of the pelvis's horizontal distance to its reference inside the root term's
@@ -603,7 +606,7 @@ class BatchEnv:
         dc = self.com_vel - self._table_rows("com_vel", 0)
         com_err = (dc * dc).sum(axis=1)
         r = (w.pose * np.exp(-2.0 * pose_err) + w.velocity * np.exp(-0.1 * vel_err) + w.end_effector
-             * np.exp(-40.0 * ee_err) + w.root * np.exp(-root_err) + w.com * np.exp(-com_err))
+             * np.exp(-w.ee_scale * ee_err) + w.root * np.exp(-root_err) + w.com * np.exp(-com_err))
         if self.config.assist.active:
             r = r * np.exp(-w.assist_penalty * (self.assist_force_mg + self.assist_torque_mgm))
         return r

@@ -137,3 +137,25 @@ def test_protocol_reports_the_assist(setup):
         assert k in m
     assert m["assist"] == "fixed" and m["cap_mg"] == 0.5 and "assisted physics" in m["physics"]
     assert 0.0 < m["assist_force_mean_mg"] <= 0.5
+
+
+def test_the_end_effector_term_follows_its_weight_and_scale(setup, refs):
+    """reward() with only the hands-and-feet term: weight * exp(-scale * squared error), so a
+    smaller scale pays more for the same pose error, and scale 0 pays the whole weight."""
+    from dataclasses import replace
+
+    from tracker.learn.train_assisted import AssistedTrainConfig, reward_weights
+    env = _env(setup, 1)
+    env.reset([0], refs[:1])
+    rng = np.random.default_rng(3)
+    for _ in range(5):  # move off the reference so the error is not zero
+        env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
+    only = dict(pose=0.0, velocity=0.0, root=0.0, com=0.0, end_effector=0.3)
+    got = {}
+    for scale in (40.0, 10.0, 0.0):
+        w = replace(reward_weights(AssistedTrainConfig(end_effector_weight=0.3, end_effector_scale=scale)), **only)
+        env.config = replace(env.config, reward=w)
+        got[scale] = float(env.reward()[0])
+    assert got[0.0] == pytest.approx(0.3)
+    assert 0.0 < got[40.0] < got[10.0] < got[0.0]
+    assert np.log(got[40.0] / 0.3) == pytest.approx(4.0 * np.log(got[10.0] / 0.3), rel=1e-9)

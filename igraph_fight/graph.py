@@ -193,7 +193,7 @@ def replayed_arrays(arrays, header: dict, library=None, workers: int | None = 1)
     return "cannot replay the edges (no shard)"
 
 
-def replayed_shards(arrays, header: dict, library=None, workers: int | None = 1, shard_edges: int = 1 << 18):
+def replayed_shards(arrays, header: dict, library=None, workers: int | None = 1, shard_edges: int = gc.SHARD_EDGES):
     """replayed_arrays shard by shard (graph_replay.iter_replay): an iterator of (e0, e1, the
     REPLAYED arrays at edges [e0, e1)) over runs of whole states, or a string saying why the
     edges cannot be replayed (checked before the first shard)."""
@@ -1116,7 +1116,7 @@ def _encode_formula(w: "gc.Writer", arrays: dict[str, np.ndarray], k: str) -> di
 
 
 def write_compact(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarray], version: int = VERSION,
-                  library=None, chunk: int = gc.CHUNK, shard_edges: int = 1 << 18) -> dict:
+                  library=None, chunk: int = gc.CHUNK, shard_edges: int = gc.SHARD_EDGES) -> dict:
     """Write ``arrays`` and ``header`` (as ``save`` prepares it) as a compact file of ``version``
     (3 or 4), atomically, without validating them; returns the index written (the header with
     ``members`` and ``checksum``). Version 4 replays the edges with ``library`` (default: the

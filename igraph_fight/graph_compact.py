@@ -95,6 +95,8 @@ def narrow_dtype(a: np.ndarray) -> np.dtype:
 
 #: values per piece when an array is encoded, compared or compressed piece by piece
 CHUNK = 1 << 21
+#: edges per shard when a file's edges are replayed shard by shard (graph_replay.iter_replay)
+SHARD_EDGES = 1 << 18
 
 
 def chunks(n: int, size: int = CHUNK) -> Iterator[tuple[int, int]]:

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from igraph_fight import sim
+from igraph_fight.graph_compact import SHARD_EDGES
 from igraph_fight.sim import relative_pose, sample_world
 
 #: what replay_edges returns, in column order of its kernel's output
@@ -191,7 +192,7 @@ def state_runs(offsets: np.ndarray, edges_per_run: int) -> list[tuple[int, int]]
     return list(zip(bounds[:-1], bounds[1:]))
 
 
-def iter_replay(tables: sim.SimTables, arrays, workers: int | None = 1, shard_edges: int = 1 << 18,
+def iter_replay(tables: sim.SimTables, arrays, workers: int | None = 1, shard_edges: int = SHARD_EDGES,
                 shard_states: int | None = None,
                 checked: bool = False) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
     """replay_edges shard by shard: (e0, e1, the replay of edges [e0, e1)) for consecutive runs

@@ -93,3 +93,65 @@ def test_shipped_assisted_tracker_needs_less_assist_than_fixed(boxing_library):
     (done_l, f_l), (done_f, f_f) = figures["learned"], figures["fixed"]
     assert done_l >= 3 and done_f >= 3, figures
     assert f_l < f_f, figures
+
+
+def test_strike_reward_follows_the_strike_windows(bout_parts):
+    """Bout training's strike term: zero outside the fighter's strike windows, the closeness of the
+    strike's fist inside them, plus the bonus per hit landed; refused settings raise."""
+    import math
+
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.setup import BoutConfig
+    from tracker.learn.train_assisted_bouts import BoutTrainConfig, strike_reward
+    setup, agents, trk = bout_parts
+    bc = BoutTrainConfig(strike_weight=0.7, strike_scale_m=0.1, hit_bonus=2.0)
+    bout = PhysicsBout(setup, agents, trk, BoutConfig(seconds=6.0))
+    bout.start(seed=3)
+    inside = outside = 0
+    for _ in range(bout.n_steps):
+        n_hits = len(bout.hit_events)
+        bout.step()
+        t = bout.env.t
+        for k in (0, 1):
+            r = strike_reward(bout, k, t, n_hits, bc)
+            hits = sum(1 for h in bout.hit_events[n_hits:] if h["attacker"] == k)
+            if bout.F[0].down or bout.F[1].down:
+                assert r == 0.0
+                continue
+            gaps = [bout.judge.fist_target_distance(bout.env.data, k, 1 - k, side) for side in (0, 1)
+                    if bout.judge.strike_for(bout.F[k], side, t) is not None]
+            want = (0.7 * math.exp(-min(gaps) / 0.1) if gaps else 0.0) + 2.0 * hits
+            assert r == pytest.approx(want)
+            inside += bool(gaps)
+            outside += not gaps
+    assert inside > 0 and outside > 0              # both cases were seen
+    with pytest.raises(ValueError, match="strike_scale_m"):
+        BoutTrainConfig(strike_scale_m=0.0)
+
+
+def test_target_points_lie_inside_the_nearest_target(bout_parts):
+    """HitJudge.nearest_target picks the target geom whose surface is nearest to a point, and
+    target_point lies depth_m inside that surface (at most at its axis) on the way from the point."""
+    from tracker.bouts.physics_bout import PhysicsBout
+    from tracker.bouts.setup import BoutConfig
+    setup, agents, trk = bout_parts
+    bout = PhysicsBout(setup, agents, trk, BoutConfig(seconds=1.0))
+    bout.start(seed=2)
+    d, judge = bout.env.data, bout.judge
+    m = setup.scene.model
+    rng = np.random.default_rng(0)
+    pelvis = bout.pelvis_xy(1)
+    for _ in range(20):
+        p = np.array([pelvis[0], pelvis[1], 1.2]) + rng.normal(scale=0.4, size=3)
+        g = judge.nearest_target(d, 1, p)
+        assert judge.target_owner[g] == 1
+        gaps = {}
+        for h in judge.target_geoms[1]:
+            q = judge.target_point(d, int(h), p, 0.0)              # on the surface
+            gaps[int(h)] = float(np.linalg.norm(p - q))
+        assert min(gaps, key=gaps.get) == g
+        deep = judge.target_point(d, g, p, 0.03)
+        surf = judge.target_point(d, g, p, 0.0)
+        r = float(m.geom_size[g, 0])
+        assert np.linalg.norm(deep - surf) == pytest.approx(min(0.03, r), abs=1e-9)
+        assert np.linalg.norm(p - deep) > np.linalg.norm(p - surf) or np.linalg.norm(p - surf) < 1e-9

@@ -156,6 +156,28 @@ class HitJudge:
                     return seg, j
         return None
 
+    def nearest_target(self, d: mujoco.MjData, b: int, point: np.ndarray) -> int:
+        """The geom id of fighter b's head, chest or belly geom nearest to ``point`` (world, m)."""
+        tg, tr, thl = self._target_geo[b]
+        gaps = [float(np.linalg.norm(point - self._axis_point(d, int(g), h, point))) - r for g, r, h in zip(tg, tr, thl)]
+        return int(tg[int(np.argmin(gaps))])
+
+    def target_point(self, d: mujoco.MjData, g: int, point: np.ndarray, depth_m: float) -> np.ndarray:
+        """The point ``depth_m`` inside target geom g's surface on the way from ``point`` to its
+        axis (its centre at the most), world m."""
+        i = int(np.flatnonzero(self._target_geo[self.target_owner[g]][0] == g)[0])
+        _, tr, thl = self._target_geo[self.target_owner[g]]
+        c = self._axis_point(d, g, float(thl[i]), point)
+        u = point - c
+        n = float(np.linalg.norm(u))
+        return c if n < 1e-9 else c + u / n * max(float(tr[i]) - depth_m, 0.0)
+
+    @staticmethod
+    def _axis_point(d: mujoco.MjData, g: int, half: float, point: np.ndarray) -> np.ndarray:
+        axis = d.geom_xmat[g][[2, 5, 8]]
+        c = d.geom_xpos[g]
+        return c + float(np.clip((point - c) @ axis, -half, half)) * axis
+
     def fist_target_distance(self, d: mujoco.MjData, a: int, b: int, side: int = -1) -> float:
         """Closest distance (m, >= 0) between a's fist spheres (both, or ``side`` 0 left / 1 right)
         and b's head/chest/belly geoms (spheres, or capsules as segments with a radius)."""

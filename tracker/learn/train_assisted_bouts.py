@@ -16,7 +16,9 @@ inside physics bouts (tracker.bouts.physics_bout, the bout rules unchanged). Rea
    every other bout), seeds ``seed0 + bout index`` (far from the evaluation seeds). A fighter's
    control steps while it stands are its trajectory: a fall terminates it (value 0 after), the
    bout's end cuts it (bootstrapped); the steps it lies down are not samples. Reward: the batched
-   env's tracking terms times the assist penalty (as in walk training), per fighter.
+   env's tracking terms times the assist penalty (as in walk training), per fighter, plus an
+   optional strike term (``strike_reward``, off by default): inside the fighter's strike windows,
+   closeness of the strike's fist to the opponent's target, and a bonus per hit landed.
 4. ``train_assisted.ppo_update`` on the iteration's samples; the observation normaliser updated
    after it (the batch used the old statistics). Then ``walks_per_bout`` iterations of the walk
    route (``train_assisted.collect_walks``, its pushes included) on the same library, so that what
@@ -53,6 +55,14 @@ class BoutTrainConfig:
     seed0: int = 1_000_000
     noise_seed: int = 0
     walks_per_bout: int = 2
+    strike_weight: float = 0.0
+    strike_scale_m: float = 0.05
+    hit_bonus: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.strike_weight >= 0 or not self.strike_scale_m > 0 or not self.hit_bonus >= 0:
+            raise ValueError("strike_weight and hit_bonus must be >= 0 and strike_scale_m > 0, got "
+                             f"{self.strike_weight}, {self.hit_bonus}, {self.strike_scale_m}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "BoutTrainConfig":
@@ -117,19 +127,44 @@ class SamplingTracker:
         return f"assisted tracker in training (cap {self.cap:g} mg, exploring)"
 
 
-def collect(bout, sampler: SamplingTracker, seed: int, cfg: AssistedTrainConfig) -> tuple[dict, dict]:
+def strike_reward(bout, k: int, t: int, n_hits: int, bc: "BoutTrainConfig") -> float:
+    """The strike term of fighter k at control step t (module docstring, item 3): while a strike
+    window of its current action is open (as the hit judge widens it, strike not landed yet),
+    ``strike_weight`` exp(-gap / ``strike_scale_m``), gap the strike fist's distance to the
+    opponent's head, chest or belly; plus ``hit_bonus`` per hit it landed this step (hit events from
+    index ``n_hits`` on). Zero while either fighter is down."""
+    if bout.F[0].down or bout.F[1].down:
+        return 0.0
+    r = 0.0
+    if bc.strike_weight > 0:
+        for side in (0, 1):
+            if bout.judge.strike_for(bout.F[k], side, t) is not None:
+                gap = bout.judge.fist_target_distance(bout.env.data, k, 1 - k, side)
+                r = max(r, bc.strike_weight * math.exp(-gap / bc.strike_scale_m))
+    if bc.hit_bonus > 0:
+        r += bc.hit_bonus * sum(1 for h in bout.hit_events[n_hits:] if h["attacker"] == k)
+    return r
+
+
+def collect(bout, sampler: SamplingTracker, seed: int, cfg: AssistedTrainConfig,
+            bc: "BoutTrainConfig | None" = None) -> tuple[dict, dict]:
     """Play one bout with the sampler; the samples of both fighters (arrays over their standing
-    steps, advantages and returns by GAE per trajectory) and the bout's summary."""
+    steps, advantages and returns by GAE per trajectory) and the bout's summary. ``bc``: the strike
+    term's weights (strike_reward; none by default)."""
     bout.start(seed)
     rows: list[list[tuple]] = [[], []]
+    strikes = bc is not None and (bc.strike_weight > 0 or bc.hit_bonus > 0)
     for _ in range(bout.n_steps):
         down = [f.down for f in bout.F]
+        n_hits = len(bout.hit_events)
         bout.step()
+        t = bout.env.t
         x, z, a, lp, v = sampler.last
         rew, fall = bout.step_reward, bout.step_info.fall
         for k in (0, 1):
             if not down[k]:
-                rows[k].append((x[k], z[k], a[k], lp[k], v[k], float(rew[k]), fall[k] is not None))
+                r = float(rew[k]) + (strike_reward(bout, k, t, n_hits, bc) if strikes else 0.0)
+                rows[k].append((x[k], z[k], a[k], lp[k], v[k], r, fall[k] is not None))
     v_end = sampler.value(bout.observation)
     summary = bout.finish().summary()
     parts = {key: [] for key in ("raw", "z", "a", "lp", "adv", "ret", "r")}
@@ -233,7 +268,7 @@ def train_in_bouts(out: str, minutes: float, graph, resume: str | None = None,
         sampler.load(actor, critic, norm)
         bout = PhysicsBout(setup, [agents[a_style], agents[b_style]], sampler, bcfg)
         t0 = time.perf_counter()
-        batch, s = collect(bout, sampler, bout_cfg.seed0 + i, cfg)
+        batch, s = collect(bout, sampler, bout_cfg.seed0 + i, cfg, bout_cfg)
         n = len(batch.get("r", ()))
         kl = float("nan")
         if n >= 2:

@@ -155,3 +155,30 @@ def test_target_points_lie_inside_the_nearest_target(bout_parts):
         r = float(m.geom_size[g, 0])
         assert np.linalg.norm(deep - surf) == pytest.approx(min(0.03, r), abs=1e-9)
         assert np.linalg.norm(p - deep) > np.linalg.norm(p - surf) or np.linalg.norm(p - surf) < 1e-9
+
+
+def test_root_hold_adds_the_fixed_pull_under_the_cap():
+    """``assisted+hold=H``: the policy's wrench plus H times the fixed assist's pull (the
+    observation's last six numbers, cap units), clipped to the cap; bad specs are refused."""
+    from tracker.bouts.loaders import load_tracker
+    from tracker.track.assisted_policy import DEFAULT_ASSISTED_CKPT
+    if not DEFAULT_ASSISTED_CKPT.is_file():
+        pytest.skip("no shipped assisted tracker")
+    plain, held = load_tracker("assisted"), load_tracker("assisted+hold=0.5")
+    assert plain.hold == 0.0 and held.hold == 0.5 and "root hold 0.5" in held.describe()
+
+    class Env:
+        def reference_targets(self):
+            return np.zeros((3, plain.n_act))
+
+    obs = np.random.default_rng(0).normal(size=(3, plain.obs_dim))
+    obs[:, -6:] = np.linspace(-1.5, 1.5, 18).reshape(3, 6)
+    t0, w0 = plain.act(Env(), obs)
+    t1, w1 = held.act(Env(), obs)
+    assert np.array_equal(t0, t1)
+    raw = plain.policy_output(obs)[:, plain.n_act:]
+    assert np.allclose(w1, np.clip(raw + 0.5 * obs[:, -6:], -1.0, 1.0)) and np.abs(w1).max() <= 1.0
+    assert not np.allclose(w0, w1)
+    for bad in ("assisted+hold=x", "assisted+hold=3", "assisted-off+hold=0.5", "assisted+grip=1"):
+        with pytest.raises(ValueError, match="assisted\\+hold"):
+            load_tracker(bad)

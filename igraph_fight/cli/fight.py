@@ -40,7 +40,8 @@ def register(sub) -> None:
     p.add_argument("--tracker", default=None,
                    help="physics: tracking controller: assisted[:CKPT] (default, or $IGRAPH_FIGHT_TRACKER: the "
                         "shipped learned tracker, assisted physics with a bounded, reported balance wrench), "
-                        "assisted-off[:CKPT] (plain physics), pd-fixed[=CAP], pd-batch, legacy[:CKPT] or pd")
+                        "assisted-off[:CKPT] (plain physics), assisted+hold=H[:CKPT] (plus H times the fixed "
+                        "pull to the reference root), pd-fixed[=CAP], pd-batch, legacy[:CKPT] or pd")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=cmd_fight)
 

@@ -6,10 +6,12 @@ the fist's peak extension from the shoulder against the reference's, and the tim
 aligns the physical fist with its reference.
 
     python -m research.probes.strike_reach --graph G.igz --seeds 1-10 [--tracker assisted[:CKPT]]
-        [--arm-gain 2] [--arm-residual 0.5]
+        [--arm-gain 2] [--arm-residual 0.5] [--arm-lead 2]
 
 ``--arm-gain``: the shoulder and elbow PD gains (and torque limits) times this; ``--arm-residual``:
-the learned tracker's residuals on those joints times this (0: plain PD arms).
+the learned tracker's residuals on those joints times this (0: plain PD arms); ``--arm-lead``: the
+shoulder and elbow PD targets taken this many control steps further ahead in the reference (the
+policy's residuals added as before).
 """
 from __future__ import annotations
 
@@ -40,6 +42,21 @@ def wrap_arm_residual(trk, scale: float, act_class) -> None:
     trk.act = types.MethodType(act, trk)
 
 
+def wrap_arm_lead(trk, lead: int, act_class) -> None:
+    """Shoulder and elbow PD targets from the reference ``lead`` more control steps ahead."""
+    orig = trk.act
+    arm = np.array([c in ("upper_arm", "forearm") for c in act_class])
+
+    def act(self, env, obs):
+        t, w = orig(env, obs)
+        t = np.array(t)
+        base = env.config.target_lead
+        t[:, arm] += env.reference_targets(base + lead)[:, arm] - env.reference_targets(base)[:, arm]
+        return t, w
+
+    trk.act = types.MethodType(act, trk)
+
+
 def main(argv=None) -> int:
     import mujoco
 
@@ -56,6 +73,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tracker", default="assisted")
     ap.add_argument("--arm-gain", type=float, default=1.0)
     ap.add_argument("--arm-residual", type=float, default=1.0)
+    ap.add_argument("--arm-lead", type=int, default=0)
     ap.add_argument("--out", default=None, help="write the figures as JSON")
     a = ap.parse_args(argv)
     g = load_graph(a.graph)
@@ -67,6 +85,8 @@ def main(argv=None) -> int:
     fm = setup.scene.fighters[0]
     if a.arm_residual != 1.0:
         wrap_arm_residual(trk, a.arm_residual, fm.act_class)
+    if a.arm_lead:
+        wrap_arm_lead(trk, a.arm_lead, fm.act_class)
     agents = [make_agent("infighter", g, lib, 5), make_agent("outboxer", g, lib, 5)]
     m = setup.scene.model
     scratch = mujoco.MjData(m)
@@ -131,7 +151,7 @@ def main(argv=None) -> int:
     R = np.array(rows, float).reshape(-1, 4)
     reach = R[:, 1] < 0.02
     far = R[:, 1] > 0.05
-    out = {"seeds": a.seeds, "tracker": a.tracker, "arm_gain": a.arm_gain, "arm_residual": a.arm_residual,
+    out = {"seeds": a.seeds, "tracker": a.tracker, "arm_gain": a.arm_gain, "arm_residual": a.arm_residual, "arm_lead": a.arm_lead,
            "planned_hits": totals["planned"], "planned_realised": totals["realised"],
            "windows": int(len(R)), "windows_landed": int(R[:, 2].sum()),
            "closest_gap_m_median": float(np.median(R[:, 0])) if len(R) else None,

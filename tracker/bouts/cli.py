@@ -27,6 +27,7 @@ FUTURE_HELP = "calibrated (default), physical, kinematic or none"
 
 TRACKER_HELP = ("tracking controller: assisted[:CKPT] (the default: the shipped learned tracker, assisted physics "
                 "with its bounded wrench reported), assisted-off[:CKPT] (the same policy, plain physics), "
+                "assisted+hold=H[:CKPT] (plus H times the fixed pull to the reference root, same cap), "
                 "pd-fixed[=CAP], pd-batch, legacy[:CKPT] or pd")
 FIGHTER_HELP = ("style, STYLE+phys[:MODEL] (physically measured hit odds, tracker.bouts.hit_model), "
                 "STYLE+close[=R,THETA][:avoid=A,B,...] (closes in by a geometric rule until engaged within R m "

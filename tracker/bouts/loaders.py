@@ -18,6 +18,8 @@ def load_tracker(spec=None):
       when that file is missing, the legacy policy, else PD (a warning on stderr);
     - ``"assisted"`` or ``"assisted:CKPT"``: the learned assisted tracker (tracker.track.assisted_policy),
       ``"assisted-off[:CKPT]"`` the same policy with its assist off (plain physics);
+      ``"assisted+hold=H[:CKPT]"``: the same with H times the fixed assist's pull toward the
+      reference root pose added to its wrench (under the same cap);
     - ``"pd-batch"``: PD tracking on the batched env, no assist; ``"pd-fixed"`` or
       ``"pd-fixed=CAP"``: PD with the fixed assist (cap in body weights, default 0.5);
     - ``"legacy"`` or ``"legacy:CKPT"``: the unassisted per-fighter policy
@@ -41,10 +43,20 @@ def load_tracker(spec=None):
             from tracker.track.policy_net import DEFAULT_CKPT
             if not DEFAULT_CKPT.is_file():
                 raise ValueError(f"tracker 'legacy': no legacy policy at {DEFAULT_CKPT}")
-    if isinstance(spec, str) and spec.split(":")[0] in ("assisted", "assisted-off"):
+    if isinstance(spec, str) and spec.split(":")[0].split("+")[0] in ("assisted", "assisted-off"):
         from tracker.track.assisted_policy import load_assisted
         kind, _, path = spec.partition(":")
-        return load_assisted(path or None, assist_off=kind == "assisted-off")
+        kind, _, extra = kind.partition("+")
+        hold = 0.0
+        if extra:
+            name, _, val = extra.partition("=")
+            try:
+                hold = float(val)
+            except ValueError:
+                hold = -1.0
+            if name != "hold" or kind != "assisted" or not 0.0 <= hold <= 2.0:
+                raise ValueError(f"tracker {spec!r}: expected assisted+hold=H[:CKPT] with H in [0, 2]")
+        return load_assisted(path or None, assist_off=kind == "assisted-off", hold=hold)
     if isinstance(spec, str) and (spec == "pd-batch" or spec.startswith("pd-fixed")):
         from tracker.track.pd import STANCE_GAINS, PDTracker
         if spec == "pd-batch":

@@ -58,13 +58,16 @@ class AssistedController:
         cap: the assist cap (body weights) the policy was trained at last.
         residual_clip: residuals are clipped to +- this (rad), as in training.
         assist_off: ignore the policy's wrench (pure physics with the same joint policy).
+        hold: add this share of the fixed PD's wrench toward the reference root pose (what the
+            observation's last six numbers hold, cap units) to the policy's wrench before the cap
+            (0: the policy alone).
     """
 
     name = "learned"
     batched = True
     physics_hz = 120.0
 
-    def __init__(self, ckpt: dict, path: str = "", assist_off: bool = False) -> None:
+    def __init__(self, ckpt: dict, path: str = "", assist_off: bool = False, hold: float = 0.0) -> None:
         if ckpt.get("format") != FORMAT or int(ckpt.get("version", -1)) != VERSION:
             raise CheckpointError(path or "checkpoint", f"not an assisted-tracker checkpoint of version {VERSION}")
         self.path = path
@@ -80,6 +83,9 @@ class AssistedController:
         self.budget = dict(ckpt.get("budget", {}))
         self.gain_scale = tuple(tuple(x) for x in self.config.get("class_scale", ()))
         self.assist_off = bool(assist_off)
+        if not 0.0 <= hold <= 2.0:
+            raise ValueError(f"hold must be in [0, 2] (a share of the fixed assist), not {hold}")
+        self.hold = float(hold)
         self.assist_gain = np.asarray(ckpt["actor"].get("assist_gain", np.zeros(N_ASSIST)), dtype=np.float64)
         self.physics_hz = float(self.config.get("physics_hz", 120.0))
 
@@ -112,20 +118,24 @@ class AssistedController:
         targets = env.reference_targets() + np.clip(a[:, :self.n_act], -self.residual_clip, self.residual_clip)
         if self.assist_off:
             return targets, None
-        return targets, np.clip(a[:, self.n_act:], -1.0, 1.0)
+        wrench = a[:, self.n_act:]
+        if self.hold:
+            wrench = wrench + self.hold * np.atleast_2d(obs)[:, -N_ASSIST:]
+        return targets, np.clip(wrench, -1.0, 1.0)
 
     def describe(self) -> str:
         b = self.budget
-        off = ", assist off" if self.assist_off else ""
+        off = ", assist off" if self.assist_off else (f", root hold {self.hold:g}" if self.hold else "")
         return (f"assisted tracker {self.path or '(in memory)'}{off}: cap {self.cap:g} mg, trained "
                 f"{b.get('samples', 0) / 1e6:.1f}M samples, {b.get('cpu_s', 0.0) / 3600:.2f} CPU-hours")
 
 
-def load_assisted(path: str | os.PathLike | None = None, assist_off: bool = False) -> AssistedController:
+def load_assisted(path: str | os.PathLike | None = None, assist_off: bool = False,
+                  hold: float = 0.0) -> AssistedController:
     """An AssistedController from a checkpoint file (default: the shipped one), read weights-only
     (igraph_fight.checkpoint.load_checkpoint: no code runs from the file)."""
     p = Path(path) if path else DEFAULT_ASSISTED_CKPT
     if not p.is_file():
         raise CheckpointError(str(p), "no assisted-tracker checkpoint here (train one: igraph-fight tracker train-assisted)")
     ck = load_checkpoint(p, FORMAT, (VERSION,), "assisted-tracker checkpoint")
-    return AssistedController(ck, str(p), assist_off=assist_off)
+    return AssistedController(ck, str(p), assist_off=assist_off, hold=hold)

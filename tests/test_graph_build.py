@@ -378,6 +378,20 @@ def test_cli_build_with_a_guard_records_it_for_every_user_of_the_graph(lib, tmp_
     assert "guard_radius_m" in capsys.readouterr().err
 
 
+def test_cli_build_with_smaller_targets_records_them(lib, tmp_path, capsys):
+    from igraph_fight.cli import main
+    from igraph_fight.graph import load_graph
+
+    lib.save(tmp_path / "lib.npz")
+    base = ["build", "--library", str(tmp_path / "lib.npz"), "--max-samples", "2000", "--n-initial", "16",
+            "--seed-bouts", "0", "--quiet"]
+    assert main(base + ["--out", str(tmp_path / "g.igz"), "--target-radius", "0.05,0.1,0.1"]) == 0
+    assert load_graph(tmp_path / "g.igz").sim_params().target_radius_m == {"head": 0.05, "chest": 0.1, "belly": 0.1}
+    for bad in ("0.05,0.1", "0,0.1,0.1", "a,b,c"):
+        assert main(base + ["--out", str(tmp_path / "h.igz"), "--target-radius", bad]) == 2
+        assert "HEAD,CHEST,BELLY" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("tr, tt", [(0.1, math.radians(20)), (0.025, math.radians(5))])
 def test_spatial_index_agrees_with_brute_force(tr, tt):
     """Any grid answers exactly (the sampler's duplicate index is a finer grid than the linking one)."""

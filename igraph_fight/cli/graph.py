@@ -32,6 +32,18 @@ def _share_deg(text: str) -> tuple[float, float]:
     return share, deg
 
 
+def _target_radii(text: str) -> dict:
+    """'HEAD,CHEST,BELLY' -> the kinematic simulator's target radii (metres)."""
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 3 or not all(0 < v <= 1 for v in vals):
+        raise argparse.ArgumentTypeError(f"expected three radii in metres, HEAD,CHEST,BELLY in (0, 1] "
+                                         f"(e.g. 0.10,0.15,0.15), got {text!r}")
+    return dict(zip(("head", "chest", "belly"), vals))
+
+
 def register(sub) -> None:
     p = sub.add_parser("build", help="explore, cluster and link an Interaction Graph from mocap or a library",
                        description="Build an Interaction Graph. The sampler's archive is checkpointed to "
@@ -65,6 +77,9 @@ def register(sub) -> None:
     p.add_argument("--no-prune", action="store_true", help="keep dead-end states")
     p.add_argument("--guard", type=float, default=None, metavar="RADIUS_M",
                    help="block strikes at the other's forearms (capsules of this radius, e.g. 0.05; default: no guard)")
+    p.add_argument("--target-radius", type=_target_radii, default=None, metavar="HEAD,CHEST,BELLY",
+                   help="radii of the target spheres a fist must touch for a predicted hit (m; default "
+                        "0.10,0.15,0.15); smaller radii plan only deeper hits")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler's initial states (default 0)")
     p.add_argument("--workers", type=int, default=1,
                    help="threads of the local backend, Ray actors of the ray backend (0: all cores); "
@@ -133,8 +148,13 @@ def _options(args: argparse.Namespace):
         kw["initial_facing_share"], kw["initial_facing_deg"] = float(args.initial_facing[0]), float(args.initial_facing[1])
     if args.no_prune:
         kw["prune_dead_ends"] = False
+    sim = {}
     if getattr(args, "guard", None) is not None:
-        kw["sim"] = SimParams(guard_radius_m=args.guard)
+        sim["guard_radius_m"] = args.guard
+    if getattr(args, "target_radius", None) is not None:
+        sim["target_radius_m"] = args.target_radius
+    if sim:
+        kw["sim"] = SimParams(**sim)
     opts = dataclasses.replace(BuildOptions(), **kw)
     opts.validate()
     return opts

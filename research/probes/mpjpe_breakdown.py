@@ -3,7 +3,8 @@ distance to the reference re-rooted at *every* control step (the reference pelvi
 position and yaw put on the simulated pelvis's: what is left once root drift is removed), by body
 region, beside the protocol's own figures (re-rooted once per action start); and how far the
 reference's own feet slide while they are down (the toe joints within 1.5 cm of their lowest
-height in the walk, horizontal travel per contact run: a simulated foot that sticks cannot follow).
+height in the walk, horizontal travel per contact run: a simulated foot that sticks cannot follow),
+and the pelvis's horizontal speed error by how fast the slower planted reference toe slides.
 
     python -m research.probes.mpjpe_breakdown [--ckpt A.pt] [--walks 30] [--seed 0] [--friction 0.5]
 
@@ -35,11 +36,14 @@ class StepErrors:
 
     batched = True
 
-    def __init__(self, inner) -> None:
+    def __init__(self, inner, toes: list[int] | None = None) -> None:
         self.inner = inner
         self.name = inner.name
         self.physics_hz = inner.physics_hz
         self.errors: list[np.ndarray] = []
+        self.toes = list(toes or [])
+        self.slide: list[tuple[float, float]] = []    # (reference toe slide speed, pelvis speed error), m/s
+        self._down: dict = {}
 
     def reset(self, env) -> None:
         self.inner.reset(env)
@@ -60,6 +64,17 @@ class StepErrors:
             sites = ref.sites[t, env.tracked].copy()
             sites[:, :2] = (sites[:, :2] - ref.qpos[t, :2]) @ R.T + env.qpos[b, :2]
             self.errors.append(np.linalg.norm(env.site_pos[b, env.tracked] - sites, axis=1))
+            if self.toes and t + 1 < ref.n_frames:
+                key = id(ref)
+                if key not in self._down:
+                    z = ref.sites[:, self.toes, 2]
+                    self._down = {key: z < np.percentile(z, 5, axis=0) + 0.015}
+                down = self._down[key]
+                on = down[t] & down[t + 1]
+                if on.any():
+                    v = np.linalg.norm(ref.sites[t + 1, self.toes, :2] - ref.sites[t, self.toes, :2], axis=1) * ref.fps
+                    self.slide.append((float(v[on].min()),
+                                       float(np.linalg.norm(env.qvel[b, :2] - ref.qvel[t, :2]))))
         return self.inner.act(env, obs)
 
 
@@ -82,6 +97,17 @@ def foot_slide(ref, toe_sites: list[int], fps: float) -> tuple[list[float], list
         if travel > 0:
             runs.append(travel)
     return runs, speeds
+
+
+def slide_table(S: np.ndarray) -> dict:
+    """Mean pelvis horizontal speed error (cm/s) and step count, by how fast the slower of the
+    reference's planted toes slides (cm/s bins)."""
+    out = {}
+    for lo, hi in ((0, 5), (5, 20), (20, 50), (50, 1e9)):
+        m = (S[:, 0] * 100 >= lo) & (S[:, 0] * 100 < hi) if len(S) else np.zeros(0, bool)
+        out[f"{lo}-{hi:g}" if hi < 1e9 else f">{lo}"] = {"steps": int(m.sum()),
+                                                          "mean": round(100 * float(S[m, 1].mean()), 1) if m.any() else None}
+    return out
 
 
 def main(argv=None) -> int:
@@ -109,10 +135,10 @@ def main(argv=None) -> int:
         opts = replace(opts, friction=a.friction)
     setup = make_setup(src, opts)
     walks = draw_walks(src, a.walks, a.actions, a.seed)
-    probe = StepErrors(ctrl)
-    runs, _ = run_walks(setup, probe, walks, BatchConfig(assist=ctrl.assist_config()), parallel=8)
     f = setup.scene.fighters[0]
     names = [mujoco.mj_id2name(setup.scene.model, mujoco.mjtObj.mjOBJ_SITE, int(i)) for i in f.site_ids]
+    probe = StepErrors(ctrl, [i for i, n in enumerate(names) if n.endswith("ToeBase")])
+    runs, _ = run_walks(setup, probe, walks, BatchConfig(assist=ctrl.assist_config()), parallel=8)
     tracked = [names[i] for i in np.nonzero(f.tracked)[0]]
     E = np.array(probe.errors)
     toes = [i for i, n in enumerate(names) if n.endswith("ToeBase")]
@@ -133,6 +159,7 @@ def main(argv=None) -> int:
                                                   "p90": round(100 * float(np.percentile(slide_runs, 90)), 2)},
            "reference_toe_speed_down_cm_s": {"median": round(100 * float(np.median(slide_speed)), 2),
                                              "p90": round(100 * float(np.percentile(slide_speed, 90)), 2)},
+           "pelvis_speed_error_by_reference_slide_cm_s": slide_table(np.array(probe.slide)),
            "worst_sites_cm": dict(sorted(((n, round(100 * float(E[:, i].mean()), 2)) for i, n in enumerate(tracked)),
                                          key=lambda kv: -kv[1])[:8])}
     print(json.dumps(out, indent=1))

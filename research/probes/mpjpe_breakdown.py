@@ -53,24 +53,20 @@ class StepErrors:
 
     def act(self, env, obs):
         from tracker.track.batch_env import yaws_of
+        from tracker.track.walk_protocol import rerooted_site_errors
         for b in range(env.B):
             ref = env.refs[b]
             if ref is None or env.done[b]:
                 continue
             t = int(env.t[b])
-            dyaw = float(yaws_of(env.R[b:b + 1], env.lateral[b])[0]) - float(env.tables[b]["yaw"][t])
-            c, s = np.cos(dyaw), np.sin(dyaw)
-            R = np.array([[c, -s], [s, c]])
-            sites = ref.sites[t, env.tracked].copy()
-            sites[:, :2] = (sites[:, :2] - ref.qpos[t, :2]) @ R.T + env.qpos[b, :2]
-            self.errors.append(np.linalg.norm(env.site_pos[b, env.tracked] - sites, axis=1))
+            anchor = (env.qpos[b, :2], float(yaws_of(env.R[b:b + 1], env.lateral[b])[0]), ref.qpos[t, :2],
+                      float(env.tables[b]["yaw"][t]))
+            self.errors.append(rerooted_site_errors(env, b, anchor))
             if self.toes and t + 1 < ref.n_frames:
-                key = id(ref)
-                if key not in self._down:
-                    z = ref.sites[:, self.toes, 2]
-                    self._down = {key: z < np.percentile(z, 5, axis=0) + 0.015}
-                down = self._down[key]
-                on = down[t] & down[t + 1]
+                cached = self._down.get(id(ref))
+                if cached is None or cached[0] is not ref:        # ids of dropped references recur
+                    cached = self._down[id(ref)] = (ref, toes_down(ref, self.toes))
+                on = cached[1][t] & cached[1][t + 1]
                 if on.any():
                     v = np.linalg.norm(ref.sites[t + 1, self.toes, :2] - ref.sites[t, self.toes, :2], axis=1) * ref.fps
                     self.slide.append((float(v[on].min()),
@@ -78,12 +74,19 @@ class StepErrors:
         return self.inner.act(env, obs)
 
 
+def toes_down(ref, toe_sites: list[int]) -> np.ndarray:
+    """(T, toes) bool: the toe joint within 1.5 cm of its lowest height in the reference (5th percentile)."""
+    z = ref.sites[:, toe_sites, 2]
+    return z < np.percentile(z, 5, axis=0) + 0.015
+
+
 def foot_slide(ref, toe_sites: list[int], fps: float) -> tuple[list[float], list[float]]:
     """(travel per contact run in m, horizontal speed in m/s at contact frames) of the reference's toes."""
     runs, speeds = [], []
-    for j in toe_sites:
+    down_all = toes_down(ref, toe_sites)
+    for i, j in enumerate(toe_sites):
         p = ref.sites[:, j]
-        down = p[:, 2] < np.percentile(p[:, 2], 5) + 0.015
+        down = down_all[:, i]
         step = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)
         both = down[1:] & down[:-1]
         speeds += list(step[both] * fps)

@@ -50,9 +50,10 @@ def action_starts(library, walk: list[int]) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(lengths - 1)[:-1]]).astype(np.int64)
 
 
-def _rerooted_error(env: BatchEnv, b: int, anchor: tuple[np.ndarray, float, np.ndarray, float]) -> float:
-    """Mean tracked-joint distance (m) of slot b to its reference re-anchored at the action start:
-    the reference's ground position and yaw there mapped onto the simulation's."""
+def rerooted_site_errors(env: BatchEnv, b: int, anchor: tuple[np.ndarray, float, np.ndarray, float]) -> np.ndarray:
+    """(tracked sites,) distances (m) of slot b's tracked joints to its reference re-anchored by
+    ``anchor`` = (simulated ground xy, simulated yaw, reference ground xy, reference yaw): the
+    reference's ground position and yaw there mapped onto the simulation's."""
     ref = env.refs[b]
     t = int(env.t[b])
     sim_xy, sim_yaw, ref_xy, ref_yaw = anchor
@@ -62,7 +63,12 @@ def _rerooted_error(env: BatchEnv, b: int, anchor: tuple[np.ndarray, float, np.n
     sites = ref.sites[t, env.tracked].copy()
     sites[:, :2] = (sites[:, :2] - ref_xy) @ R.T + sim_xy
     d = env.site_pos[b, env.tracked] - sites
-    return float(np.sqrt((d * d).sum(axis=1)).mean())
+    return np.sqrt((d * d).sum(axis=1))
+
+
+def _rerooted_error(env: BatchEnv, b: int, anchor: tuple[np.ndarray, float, np.ndarray, float]) -> float:
+    """Mean tracked-joint distance (m) of slot b to its reference re-anchored at the action start."""
+    return float(rerooted_site_errors(env, b, anchor).mean())
 
 
 def run_walks(setup, controller, walks: list[list[int]], config: BatchConfig = BatchConfig(), parallel: int = 16,

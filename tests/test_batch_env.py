@@ -159,3 +159,25 @@ def test_the_end_effector_term_follows_its_weight_and_scale(setup, refs):
     assert got[0.0] == pytest.approx(0.3)
     assert 0.0 < got[40.0] < got[10.0] < got[0.0]
     assert np.log(got[40.0] / 0.3) == pytest.approx(4.0 * np.log(got[10.0] / 0.3), rel=1e-9)
+
+
+def test_the_com_velocity_term_follows_its_weight_and_scale(setup, refs):
+    """reward() with only the centre-of-mass velocity term: weight * exp(-scale * |v - v_ref|^2),
+    so a larger scale pays less for the same lag, and scale 0 pays the whole weight."""
+    from dataclasses import replace
+
+    from tracker.learn.train_assisted import AssistedTrainConfig, reward_weights
+    env = _env(setup, 1)
+    env.reset([0], refs[:1])
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
+    only = dict(pose=0.0, velocity=0.0, root=0.0, end_effector=0.0)
+    got = {}
+    for scale in (10.0, 1.0, 0.0):
+        w = replace(reward_weights(AssistedTrainConfig(com_weight=0.3, com_scale=scale)), **only)
+        env.config = replace(env.config, reward=w)
+        got[scale] = float(env.reward()[0])
+    assert got[0.0] == pytest.approx(0.3)
+    assert 0.0 < got[10.0] < got[1.0] < got[0.0]
+    assert np.log(got[10.0] / 0.3) == pytest.approx(10.0 * np.log(got[1.0] / 0.3), rel=1e-9)

@@ -22,7 +22,8 @@ Read top to bottom:
    distance to its reference in the root term (1/m^2; the body lagging its reference is what makes
    a bout's planned punch fall short); ``end_effector_weight`` and ``end_effector_scale`` (1/m^2)
    set the hands-and-feet term (a smaller scale still rewards hands 10-20 cm off, where the
-   default's exponent has gone flat).
+   default's exponent has gone flat); ``com_weight`` and ``com_scale`` ((s/m)^2) set the
+   centre-of-mass velocity term (a larger scale prices the pelvis drifting within an action).
 4. ``update``: PPO with the shared helper (igraph_fight.learn.ppo: GAE, clipped surrogate).
 5. The cap curriculum: from ``cap_start`` the assist cap is multiplied by ``cap_decay`` each time
    the completion of the last ``curriculum_window`` episodes is at least ``curriculum_completion``,
@@ -79,6 +80,8 @@ class AssistedTrainConfig:
     root_xy_weight: float = 2.0
     end_effector_weight: float = 0.15
     end_effector_scale: float = 40.0
+    com_weight: float = 0.1
+    com_scale: float = 1.0
     cap_start: float = 0.5
     cap_min: float = 0.05
     cap_decay: float = 0.9
@@ -100,11 +103,12 @@ class AssistedTrainConfig:
 
 
 def reward_weights(cfg: AssistedTrainConfig):
-    """The batched env's reward weights of a run (its assist penalty, root-position weight and
-    end-effector term)."""
+    """The batched env's reward weights of a run (its assist penalty, root-position weight,
+    end-effector and centre-of-mass velocity terms)."""
     from tracker.track.batch_env import RewardWeights
     return RewardWeights(assist_penalty=cfg.assist_penalty, root_xy=cfg.root_xy_weight,
-                         end_effector=cfg.end_effector_weight, ee_scale=cfg.end_effector_scale)
+                         end_effector=cfg.end_effector_weight, ee_scale=cfg.end_effector_scale,
+                         com=cfg.com_weight, com_scale=cfg.com_scale)
 
 
 def assisted_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):

@@ -139,23 +139,31 @@ def test_protocol_reports_the_assist(setup):
     assert 0.0 < m["assist_force_mean_mg"] <= 0.5
 
 
+def _one_term_rewards(setup, refs, seed: int, keep: str, configs: dict) -> dict:
+    """reward() of a body moved off its reference, with every term but ``keep`` weighted 0, under
+    the reward weights of each AssistedTrainConfig in ``configs`` (key -> config)."""
+    from dataclasses import replace
+
+    from tracker.learn.train_assisted import reward_weights
+    env = _env(setup, 1)
+    env.reset([0], refs[:1])
+    rng = np.random.default_rng(seed)
+    for _ in range(5):  # move off the reference so the error is not zero
+        env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
+    off = {t: 0.0 for t in ("pose", "velocity", "end_effector", "root", "com") if t != keep}
+    got = {}
+    for key, cfg in configs.items():
+        env.config = replace(env.config, reward=replace(reward_weights(cfg), **off))
+        got[key] = float(env.reward()[0])
+    return got
+
+
 def test_the_end_effector_term_follows_its_weight_and_scale(setup, refs):
     """reward() with only the hands-and-feet term: weight * exp(-scale * squared error), so a
     smaller scale pays more for the same pose error, and scale 0 pays the whole weight."""
-    from dataclasses import replace
-
-    from tracker.learn.train_assisted import AssistedTrainConfig, reward_weights
-    env = _env(setup, 1)
-    env.reset([0], refs[:1])
-    rng = np.random.default_rng(3)
-    for _ in range(5):  # move off the reference so the error is not zero
-        env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
-    only = dict(pose=0.0, velocity=0.0, root=0.0, com=0.0, end_effector=0.3)
-    got = {}
-    for scale in (40.0, 10.0, 0.0):
-        w = replace(reward_weights(AssistedTrainConfig(end_effector_weight=0.3, end_effector_scale=scale)), **only)
-        env.config = replace(env.config, reward=w)
-        got[scale] = float(env.reward()[0])
+    from tracker.learn.train_assisted import AssistedTrainConfig
+    got = _one_term_rewards(setup, refs, 3, "end_effector", {
+        scale: AssistedTrainConfig(end_effector_weight=0.3, end_effector_scale=scale) for scale in (40.0, 10.0, 0.0)})
     assert got[0.0] == pytest.approx(0.3)
     assert 0.0 < got[40.0] < got[10.0] < got[0.0]
     assert np.log(got[40.0] / 0.3) == pytest.approx(4.0 * np.log(got[10.0] / 0.3), rel=1e-9)
@@ -164,20 +172,9 @@ def test_the_end_effector_term_follows_its_weight_and_scale(setup, refs):
 def test_the_com_velocity_term_follows_its_weight_and_scale(setup, refs):
     """reward() with only the centre-of-mass velocity term: weight * exp(-scale * |v - v_ref|^2),
     so a larger scale pays less for the same lag, and scale 0 pays the whole weight."""
-    from dataclasses import replace
-
-    from tracker.learn.train_assisted import AssistedTrainConfig, reward_weights
-    env = _env(setup, 1)
-    env.reset([0], refs[:1])
-    rng = np.random.default_rng(4)
-    for _ in range(5):
-        env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
-    only = dict(pose=0.0, velocity=0.0, root=0.0, end_effector=0.0)
-    got = {}
-    for scale in (10.0, 1.0, 0.0):
-        w = replace(reward_weights(AssistedTrainConfig(com_weight=0.3, com_scale=scale)), **only)
-        env.config = replace(env.config, reward=w)
-        got[scale] = float(env.reward()[0])
+    from tracker.learn.train_assisted import AssistedTrainConfig
+    got = _one_term_rewards(setup, refs, 4, "com", {
+        scale: AssistedTrainConfig(com_weight=0.3, com_scale=scale) for scale in (10.0, 1.0, 0.0)})
     assert got[0.0] == pytest.approx(0.3)
     assert 0.0 < got[10.0] < got[1.0] < got[0.0]
     assert np.log(got[10.0] / 0.3) == pytest.approx(10.0 * np.log(got[1.0] / 0.3), rel=1e-9)

@@ -178,3 +178,23 @@ def test_the_com_velocity_term_follows_its_weight_and_scale(setup, refs):
     assert got[0.0] == pytest.approx(0.3)
     assert 0.0 < got[10.0] < got[1.0] < got[0.0]
     assert np.log(got[10.0] / 0.3) == pytest.approx(10.0 * np.log(got[1.0] / 0.3), rel=1e-9)
+
+
+def test_arm_velocity_targets_shift_only_the_arm_targets(setup, refs):
+    """With arm velocity targets the arm actuators' targets carry (kd / kp) x the reference joint
+    velocity and every other target is the plain one; a mask of the wrong shape is refused."""
+    from tracker.track.env import ARM_CLASSES
+    from tracker.track.pd import STANCE_GAINS, PDTracker
+    ctrl = {}
+    for arms in (False, True):
+        env = _env(setup, 1)
+        PDTracker(class_scale=STANCE_GAINS, arm_velocity_targets=arms).reset(env)
+        env.reset(np.arange(1), refs[:1])
+        targets = env.reference_targets()
+        env.step(targets, None)
+        ctrl[arms] = env.datas[0].ctrl[env.layouts[0].ctrl] - targets[0]
+    arm = np.array([c in ARM_CLASSES for c in setup.scene.fighters[0].act_class])
+    assert np.all(ctrl[False] == 0.0)
+    assert np.all(ctrl[True][~arm] == 0.0) and np.abs(ctrl[True][arm]).max() > 1e-4
+    with pytest.raises(ValueError, match="velocity-target mask"):
+        env.set_velocity_targets(np.ones(3))

@@ -60,6 +60,7 @@ class AssistedTrainConfig:
     et_mpjpe_m: float = 0.5
     physics_hz: float = 120.0
     class_scale: tuple = STANCE_GAINS
+    arm_velocity_targets: bool = False   # arms damp towards the reference joint velocity (PDTracker)
     hidden: tuple = (512, 256)
     critic_hidden: tuple = (512, 256)
     init_log_std: float = -3.0
@@ -183,7 +184,7 @@ class Rollouts:
         self.bcfg = BatchConfig(init_noise=cfg.init_noise, assist=AssistConfig("learned", cap=self.cap),
                                 reward=reward_weights(cfg))
         self.env = BatchEnv(self.setup.scene, cfg.n_envs, self.bcfg)
-        PDTracker(class_scale=cfg.class_scale).reset(self.env)
+        PDTracker(class_scale=cfg.class_scale, arm_velocity_targets=cfg.arm_velocity_targets).reset(self.env)
         self.pool = [self._new_ref() for _ in range(cfg.pool_walks)]
         self.steps = np.zeros(cfg.n_envs, dtype=np.int64)
         self.ep_return = np.zeros(cfg.n_envs)

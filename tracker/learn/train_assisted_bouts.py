@@ -85,7 +85,7 @@ class SamplingTracker:
         self.cfg = cfg
         self.physics_hz = float(cfg.physics_hz)
         self.rng = np.random.default_rng(seed)
-        self.pd = PDTracker(class_scale=cfg.class_scale)
+        self.pd = PDTracker(class_scale=cfg.class_scale, arm_velocity_targets=cfg.arm_velocity_targets)
         self.last: tuple | None = None
 
     def load(self, actor, critic, norm: RunningNorm) -> None:

@@ -82,6 +82,7 @@ class AssistedController:
         self.residual_clip = float(self.config.get("residual_clip", 0.5))
         self.budget = dict(ckpt.get("budget", {}))
         self.gain_scale = tuple(tuple(x) for x in self.config.get("class_scale", ()))
+        self.arm_velocity_targets = bool(self.config.get("arm_velocity_targets", False))
         self.assist_off = bool(assist_off)
         if not 0.0 <= hold <= 2.0:
             raise ValueError(f"hold must be in [0, 2] (a share of the fixed assist), not {hold}")
@@ -95,7 +96,7 @@ class AssistedController:
         per_fighter = getattr(env, "batch", env).n_act
         if per_fighter != self.n_act:
             raise CheckpointError(self.path, f"the policy drives {self.n_act} actuators, the body has {per_fighter}")
-        PDTracker(class_scale=self.gain_scale).reset(env)
+        PDTracker(class_scale=self.gain_scale, arm_velocity_targets=self.arm_velocity_targets).reset(env)
 
     def assist_config(self):
         """The assist the policy drives: its own (mode "learned") at its cap, or none when off."""
@@ -126,6 +127,7 @@ class AssistedController:
     def describe(self) -> str:
         b = self.budget
         off = ", assist off" if self.assist_off else (f", root hold {self.hold:g}" if self.hold else "")
+        off += ", arm velocity targets" if self.arm_velocity_targets else ""
         return (f"assisted tracker {self.path or '(in memory)'}{off}: cap {self.cap:g} mg, trained "
                 f"{b.get('samples', 0) / 1e6:.1f}M samples, {b.get('cpu_s', 0.0) / 3600:.2f} CPU-hours")
 

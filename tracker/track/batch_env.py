@@ -70,7 +70,8 @@ class BatchConfig:
         control_hz: control (and reference) rate.
         obs_future: control steps ahead at which the reference is observed.
         target_lead: PD targets are the reference this many steps ahead (the policy's residuals add to them).
-        velocity_targets: damp towards the reference joint velocity (else towards zero).
+        velocity_targets: damp every actuator towards the reference joint velocity (else towards
+            zero); a controller may choose per actuator with ``BatchEnv.set_velocity_targets``.
         fall: the fall rule's parameters.
         terminate_on_fall: a fall ends the slot's episode (``done``).
         init_noise: std of the joint-velocity noise at reset (rad/s; reference-state initialisation).
@@ -268,7 +269,8 @@ class BatchEnv:
         self.assist_at_cap = np.zeros(self.B, dtype=bool)
         #: per slot: the assist may act (a physics bout turns it off for a fighter that is down)
         self.assist_enabled = np.ones(self.B, dtype=bool)
-        self.velocity_targets = config.velocity_targets
+        #: (B, n_act) 1.0 where an actuator damps towards the reference joint velocity, else 0.0
+        self.vt_mask = np.full((self.B, self.n_act), 1.0 if config.velocity_targets else 0.0)
         self._bad = np.zeros(self.n_envs, dtype=np.int64)   # MuJoCo's bad-acceleration warnings seen per world
         self.unstable = np.zeros(self.B, dtype=bool)       # the world's integration diverged at the last step
         self.sim_time = 0.0
@@ -288,6 +290,15 @@ class BatchEnv:
             self.model.actuator_biasprm[ids, 2] = -kd
             self.layouts[k].ratio = np.broadcast_to(kd / np.maximum(kp, 1e-9), (self.n_act,)).copy()
         self.ratio = np.stack([self.layouts[k].ratio for k in self.fighter_of])
+
+    def set_velocity_targets(self, mask: np.ndarray, fighter: int | None = None) -> None:
+        """Per actuator (n_act,), 1 to damp towards the reference joint velocity, 0 towards zero
+        (the position target is shifted by kd / kp times the reference velocity)."""
+        m = np.asarray(mask, dtype=np.float64)
+        if m.shape != (self.n_act,) or not np.all((m == 0.0) | (m == 1.0)):
+            raise ValueError(f"velocity-target mask must be ({self.n_act},) of 0 and 1, got shape {m.shape}")
+        for k in (range(self.F) if fighter is None else [fighter]):
+            self.vt_mask[self.fighter_of == k] = m
 
     def set_torque_limits(self, limit: np.ndarray, fighter: int | None = None) -> None:
         for k in (range(self.F) if fighter is None else [fighter]):
@@ -496,8 +507,8 @@ class BatchEnv:
         t0 = time.perf_counter()
         targets = np.asarray(targets, dtype=np.float64).reshape(self.B, self.n_act)
         _, _, _, cv = self._rows(self.config.target_lead)
-        if self.velocity_targets:
-            targets = targets + self.ratio * cv
+        if self.vt_mask.any():
+            targets = targets + self.ratio * self.vt_mask * cv
         hook = self.substep_hook
         run = [w for w in range(self.n_envs) if not all(self.done[w * self.F:(w + 1) * self.F]) or hook is not None]
         for w in run:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tracker.body.humanoid import KP, TORQUE
+from tracker.track.env import ARM_CLASSES
 
 
 @dataclass
@@ -95,12 +96,16 @@ class PDTracker:
         kp_scale, kd_ratio, torque_scale: as PDController's.
         class_scale: extra stiffness and torque factors per segment class (tracker.body.humanoid.KP
             keys), e.g. (("foot", 2.0),): the stance gains a body needs to stand still.
+        arm_velocity_targets: the arm actuators (tracker.track.env.ARM_CLASSES) damp towards the
+            reference joint velocity, the others towards zero: a punch is not braked by its own
+            damping (kd = 0.2 s kp lags a joint moving at v rad/s by about 0.2 v rad).
     """
 
     kp_scale: float = 1.0
     kd_ratio: float = 0.2
     torque_scale: float = 1.0
     class_scale: tuple = ()
+    arm_velocity_targets: bool = False
     name: str = "pd"
     assist_mode: str = "none"
     assist_cap: float = 0.0
@@ -121,6 +126,8 @@ class PDTracker:
             kp, kd, tq = self.gains(f)
             env.set_gains(kp, kd, k)
             env.set_torque_limits(tq, k)
+            arm = np.array([c in ARM_CLASSES for c in f.act_class], dtype=np.float64)
+            env.set_velocity_targets(arm if self.arm_velocity_targets else np.zeros_like(arm), k)
 
     def act(self, env, obs: np.ndarray) -> tuple[np.ndarray, None]:
         return env.reference_targets(), None
@@ -131,7 +138,8 @@ class PDTracker:
         return AssistConfig(self.assist_mode, self.assist_cap)
 
     def describe(self) -> str:
-        extra = ", ".join(f"{c} x{v:g}" for c, v in self.class_scale)
+        extra = ", ".join([f"{c} x{v:g}" for c, v in self.class_scale]
+                          + (["arm velocity targets"] if self.arm_velocity_targets else []))
         a = f", fixed assist cap {self.assist_cap:g} mg" if self.assist_mode == "fixed" else ""
         return f"PD tracking (kp x{self.kp_scale:g}{', ' + extra if extra else ''}){a}"
 

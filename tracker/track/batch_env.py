@@ -293,10 +293,12 @@ class BatchEnv:
 
     def set_velocity_targets(self, mask: np.ndarray, fighter: int | None = None) -> None:
         """Per actuator (n_act,), 1 to damp towards the reference joint velocity, 0 towards zero
-        (the position target is shifted by kd / kp times the reference velocity)."""
+        (the position target is shifted by kd / kp times the reference velocity). With the config's
+        ``velocity_targets`` every actuator stays on whatever the mask."""
         m = np.asarray(mask, dtype=np.float64)
         if m.shape != (self.n_act,) or not np.all((m == 0.0) | (m == 1.0)):
             raise ValueError(f"velocity-target mask must be ({self.n_act},) of 0 and 1, got shape {m.shape}")
+        m = np.maximum(m, float(self.config.velocity_targets))
         for k in (range(self.F) if fighter is None else [fighter]):
             self.vt_mask[self.fighter_of == k] = m
 

@@ -150,7 +150,7 @@ def _one_term_rewards(setup, refs, seed: int, keep: str, configs: dict) -> dict:
     rng = np.random.default_rng(seed)
     for _ in range(5):  # move off the reference so the error is not zero
         env.step(env.reference_targets() + rng.normal(0.0, 0.3, (1, env.n_act)), None)
-    off = {t: 0.0 for t in ("pose", "velocity", "end_effector", "root", "com") if t != keep}
+    off = {t: 0.0 for t in ("pose", "velocity", "end_effector", "root", "com", "sites") if t != keep}
     got = {}
     for key, cfg in configs.items():
         env.config = replace(env.config, reward=replace(reward_weights(cfg), **off))
@@ -198,3 +198,73 @@ def test_arm_velocity_targets_shift_only_the_arm_targets(setup, refs):
     assert np.all(ctrl[True][~arm] == 0.0) and np.abs(ctrl[True][arm]).max() > 1e-4
     with pytest.raises(ValueError, match="velocity-target mask"):
         env.set_velocity_targets(np.ones(3))
+
+
+def test_the_joint_position_term_follows_its_weight_and_scale(setup, refs):
+    """reward() with only the world joint-position term: weight * exp(-scale * mean squared site
+    distance), so a larger scale pays less for the same error; weight 0 (the default) adds nothing."""
+    from tracker.learn.train_assisted import AssistedTrainConfig
+    got = _one_term_rewards(setup, refs, 5, "sites", {
+        scale: AssistedTrainConfig(sites_weight=0.3, sites_scale=scale) for scale in (40.0, 10.0, 0.0)})
+    assert got[0.0] == pytest.approx(0.3)
+    assert 0.0 < got[40.0] < got[10.0] < got[0.0]
+    assert np.log(got[40.0] / 0.3) == pytest.approx(4.0 * np.log(got[10.0] / 0.3), rel=1e-9)
+    assert _one_term_rewards(setup, refs, 5, "sites", {0: AssistedTrainConfig()})[0] == 0.0
+
+
+def test_a_placed_reference_is_the_clip_moved_on_the_ground(setup, refs):
+    """place_reference moves the frames from t on rigidly on the ground (pelvis pose, world
+    velocities, joint sites) and leaves the earlier frames and the joint angles; its moved batch
+    tables equal the tables computed afresh from the moved reference."""
+    from dataclasses import replace
+
+    from tracker.track.batch_env import place_reference, quats_to_matrices, reference_tables
+    env = _env(setup, 1)
+    env.reset([0], refs[:1])
+    ref, t, dyaw = env.refs[0], 10, 0.7
+    to = np.array([1.5, -2.0])
+    placed = place_reference(ref, t, ref.qpos[t, :2], to, dyaw)
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    R3 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    assert np.array_equal(placed.qpos[:t], ref.qpos[:t]) and np.array_equal(placed.sites[:t], ref.sites[:t])
+    assert np.array_equal(placed.qpos[:, 7:], ref.qpos[:, 7:]) and np.array_equal(placed.ctrl, ref.ctrl)
+    assert np.allclose(placed.qpos[t, :2], to) and np.allclose(placed.qpos[:, 2], ref.qpos[:, 2])
+    assert np.allclose(quats_to_matrices(placed.qpos[t:, 3:7]), R3 @ quats_to_matrices(ref.qpos[t:, 3:7]))
+    rel = lambda r: r.sites[t:] - r.qpos[t:, None, :3]                          # noqa: E731
+    assert np.allclose(rel(placed), rel(ref) @ R3.T)
+    assert np.allclose(placed.qvel[t:, :3], ref.qvel[t:, :3] @ R3.T)
+    moved = placed.meta["batch_tables_0"]
+    fresh = reference_tables(replace(placed, meta={}), env.layouts[0], setup.scene, 0)
+    for k in ("R", "up", "com", "com_vel", "ee", "com_feet", "com_vel_f"):
+        assert np.allclose(moved[k][t + 1:], fresh[k][t + 1:], atol=1e-9), k
+    assert np.allclose(np.cos(moved["yaw"] - fresh["yaw"])[t:], 1.0)
+    assert np.allclose(moved["com"][t], fresh["com"][t], atol=1e-9)
+    with pytest.raises(ValueError, match="outside"):
+        place_reference(ref, ref.n_frames, ref.qpos[0, :2], to, 0.0)
+
+
+def test_body_placement_puts_the_next_clip_under_the_body(setup, refs):
+    """place_on_body: the reference pelvis's ground position and yaw at the current step become
+    the simulated pelvis's; the walk protocol with placement "body" runs and says so."""
+    from tracker.track.batch_env import BatchConfig, yaws_of
+    from tracker.track.evaluation import draw_walks
+    from tracker.track.pd import STANCE_GAINS, PDTracker
+    from tracker.track.walk_protocol import run_walks, summarise
+    env = _env(setup, 1)
+    env.reset([0], refs[:1])
+    rng = np.random.default_rng(6)
+    for _ in range(15):
+        env.step(env.reference_targets() + rng.normal(0.0, 0.2, (1, env.n_act)), None)
+    t = int(env.t[0])
+    assert np.linalg.norm(env.refs[0].qpos[t, :2] - env.qpos[0, :2]) > 1e-3
+    env.place_on_body([0])
+    assert np.allclose(env.refs[0].qpos[t, :2], env.qpos[0, :2])
+    sim_yaw = yaws_of(env.R[:1], env.lateral[0])[0]
+    assert np.cos(env.tables[0]["yaw"][t] - sim_yaw) == pytest.approx(1.0)
+    walks = draw_walks(setup.source, 1, 3, 0)
+    ctrl = PDTracker(class_scale=STANCE_GAINS)
+    runs, timing = run_walks(setup, ctrl, walks, BatchConfig(), parallel=1, placement="body")
+    m = summarise(runs, ctrl, BatchConfig(), timing, 3, 0, 70.0)
+    assert m["placement"] == "body" and m["mpjpe_rerooted_cm"] > 0.0
+    with pytest.raises(ValueError, match="placement"):
+        run_walks(setup, ctrl, walks, BatchConfig(), parallel=1, placement="game")

@@ -59,6 +59,10 @@ def register(subparsers) -> None:
                         "policy's own for learned")
     e.add_argument("--parallel", type=positive_int, default=8, help="walks simulated side by side in one process "
                    "(batched env; default 8; the figures do not depend on it except the real-time factor)")
+    e.add_argument("--placement", choices=("world", "body"), default="world",
+                   help="world (default): track each walk as drawn, its root path fixed in the world; body: place "
+                        "each action's clip under the simulated pelvis at its start, as a game and the physics bouts "
+                        "do (with --assist only)")
     e.add_argument("--walks", type=positive_int, default=100, help="number of walks (default 100)")
     e.add_argument("--json", action="store_true", help="print the metrics as JSON")
     e.add_argument("--progress", action="store_true", help="show a progress bar")
@@ -181,6 +185,10 @@ def cmd_eval(args) -> int:
         return 2
     if getattr(args, "assist", None) is not None or args.controller == "assisted":
         return _eval_batched(args)
+    if args.placement != "world":
+        print("igraph-fight: error: tracker eval: --placement body needs --assist (the batched walk protocol)",
+              file=sys.stderr)
+        return 2
     try:
         controller = _controller(args)
     except (ValueError, FileNotFoundError) as e:
@@ -244,7 +252,8 @@ def _eval_batched(args) -> int:
     setup = make_setup(src, batched_model_options(hz))
     walks = draw_walks(src, args.walks, args.actions, args.seed)
     config = BatchConfig(assist=cfg_a)
-    runs, timing = run_walks(setup, ctrl, walks, config, parallel=args.parallel, progress=args.progress)
+    runs, timing = run_walks(setup, ctrl, walks, config, parallel=args.parallel, progress=args.progress,
+                             placement=args.placement)
     m = summarise(runs, ctrl, config, timing, args.actions, args.seed, float(setup.spec.mass_kg))
     m["physics_hz"] = hz
     print(json.dumps(m, indent=2) if args.json else format_summary(m))

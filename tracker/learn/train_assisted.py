@@ -9,6 +9,9 @@ Read top to bottom:
    tracker.track.grounding); episodes start at a random frame (reference-state initialisation, with
    joint-velocity noise), end at a fall or when the joint error passes ``et_mpjpe_m`` (terminated),
    and are cut at ``max_episode_steps`` or the walk's end (the value is bootstrapped there).
+   With ``placement`` "body" each action's clip is placed under the simulated pelvis at its start
+   (BatchEnv.place_on_body), as a game and the bouts place it, so the policy tracks what the
+   protocol's re-rooted error measures instead of steering back to the walk as drawn.
    Optional pushes stand in for the opponent's contacts, which the walks lack: with probability
    ``push_prob`` per control step a slot not already pushed gets a horizontal force of
    ``push_force_mg`` body weights (uniform in the range, any direction) on one upper-body body
@@ -23,7 +26,9 @@ Read top to bottom:
    a bout's planned punch fall short); ``end_effector_weight`` and ``end_effector_scale`` (1/m^2)
    set the hands-and-feet term (a smaller scale still rewards hands 10-20 cm off, where the
    default's exponent has gone flat); ``com_weight`` and ``com_scale`` ((s/m)^2) set the
-   centre-of-mass velocity term (a larger scale prices the pelvis drifting within an action).
+   centre-of-mass velocity term (a larger scale prices the pelvis drifting within an action);
+   ``sites_weight`` and ``sites_scale`` (1/m^2) add a term on the world positions of the tracked
+   joints, what the joint error (MPJPE) measures (off by default).
 4. ``update``: PPO with the shared helper (igraph_fight.learn.ppo: GAE, clipped surrogate).
 5. The cap curriculum: from ``cap_start`` the assist cap is multiplied by ``cap_decay`` each time
    the completion of the last ``curriculum_window`` episodes is at least ``curriculum_completion``,
@@ -83,6 +88,9 @@ class AssistedTrainConfig:
     end_effector_scale: float = 40.0
     com_weight: float = 0.1
     com_scale: float = 1.0
+    sites_weight: float = 0.0            # the world joint-position term (RewardWeights.sites)
+    sites_scale: float = 20.0
+    placement: str = "world"             # "body": each action's clip placed under the body at its start
     cap_start: float = 0.5
     cap_min: float = 0.05
     cap_decay: float = 0.9
@@ -109,7 +117,8 @@ def reward_weights(cfg: AssistedTrainConfig):
     from tracker.track.batch_env import RewardWeights
     return RewardWeights(assist_penalty=cfg.assist_penalty, root_xy=cfg.root_xy_weight,
                          end_effector=cfg.end_effector_weight, ee_scale=cfg.end_effector_scale,
-                         com=cfg.com_weight, com_scale=cfg.com_scale)
+                         com=cfg.com_weight, com_scale=cfg.com_scale, sites=cfg.sites_weight,
+                         sites_scale=cfg.sites_scale)
 
 
 def assisted_nets(obs_dim: int, act_dim: int, cfg: AssistedTrainConfig):
@@ -176,6 +185,8 @@ class Rollouts:
         from tracker.track.evaluation import make_setup
         from tracker.track.pd import PDTracker, batched_model_options
         from tracker.track.walks import LibraryWalks
+        if cfg.placement not in ("world", "body"):
+            raise ValueError(f"placement must be 'world' or 'body', got {cfg.placement!r}")
         self.cfg = cfg
         self.rng = np.random.default_rng(seed)
         self.src = LibraryWalks(library)
@@ -220,8 +231,23 @@ class Rollouts:
 
     def _new_ref(self):
         from tracker.track.evaluation import walk_reference
+        from tracker.track.walk_protocol import action_starts
         walk = self.src.random_walk(self.cfg.walk_actions, self.rng)
-        return walk_reference(self.setup, walk, lift="ground")[1]
+        ref = walk_reference(self.setup, walk, lift="ground")[1]
+        ref.meta["action_starts"] = set(int(x) for x in action_starts(self.src.library, walk)[1:])
+        return ref
+
+    def place(self) -> None:
+        """With ``placement`` "body": the slots at an action's start get that clip placed under the
+        body (BatchEnv.place_on_body, as the walk protocol's ``placement="body"`` and the bouts do)."""
+        if self.cfg.placement != "body":
+            return
+        env = self.env
+        due = [b for b in range(self.cfg.n_envs)
+               if self.steps[b] > 0 and int(env.t[b]) in env.refs[b].meta.get("action_starts", ())]
+        if due:
+            env.place_on_body(due)
+            self.obs = env.observe()
 
     def refresh(self) -> None:
         for _ in range(self.cfg.refresh_walks):
@@ -394,6 +420,7 @@ def collect_walks(roll: Rollouts, actor, critic, norm: RunningNorm, cfg: Assiste
     NV = np.zeros((T, N), np.float32)
     C = np.zeros((T, N), np.float32)
     for t in range(T):
+        roll.place()
         RAW[t] = roll.obs
         x = norm(roll.obs).astype(np.float32)
         with torch.no_grad():

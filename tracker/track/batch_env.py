@@ -59,6 +59,12 @@ class RewardWeights:
     #: weight (1/m^2) of the pelvis's horizontal distance to its reference inside the root term's
     #: exponent (20 dz^2 + 5 (1 - up.up_ref) + 2 (1 - cos dyaw) + root_xy dxy^2)
     root_xy: float = 2.0
+    #: weight of a joint-position term: exp(-sites_scale * mean squared distance (m^2) of the tracked
+    #: joint sites to the reference's, in the world); off by default. The pose, end-effector and root
+    #: terms read joint angles, the facing frame and the pelvis; this one reads what the protocol's
+    #: joint error (MPJPE) measures
+    sites: float = 0.0
+    sites_scale: float = 20.0
     #: reward *= exp(-assist_penalty * (|F| / mg + |tau| / (mg m))): always positive (staying up pays),
     #: smaller the more the assist does
     assist_penalty: float = 2.0
@@ -208,6 +214,47 @@ def reference_tables(ref: Reference, layout: SlotLayout, scene: FighterScene, fi
     return tab
 
 
+def place_reference(ref: Reference, frame: int, from_xy: np.ndarray, to_xy: np.ndarray, dyaw: float) -> Reference:
+    """A copy of ``ref`` whose frames from ``frame`` on are moved on the ground: rotated by ``dyaw``
+    (rad) about the vertical through ``from_xy`` (m), then carried to ``to_xy``; earlier frames stay.
+    Root positions and orientations, world velocities, joint sites and the cached batch tables move
+    with it; joint angles, PD targets, the world vertical in the pelvis frame (``up``) and the
+    facing-frame quantities are invariant (a game placing the next clip under its character)."""
+    if not 0 <= frame < ref.n_frames:
+        raise ValueError(f"place_reference: frame {frame} outside [0, {ref.n_frames - 1}]")
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    R2 = np.array([[c, -s], [s, c]])
+    R3 = np.eye(3)
+    R3[:2, :2] = R2
+    fx, tx = np.asarray(from_xy, dtype=np.float64), np.asarray(to_xy, dtype=np.float64)
+    qpos, qvel, sites = ref.qpos.copy(), ref.qvel.copy(), ref.sites.copy()
+    sl = slice(frame, None)
+    qpos[sl, :2] = (qpos[sl, :2] - fx) @ R2.T + tx
+    qz = np.array([np.cos(dyaw / 2), 0.0, 0.0, np.sin(dyaw / 2)])     # yaw quaternion (w, x, y, z)
+    w1, v1 = qz[0], qz[1:]
+    q = qpos[sl, 3:7].copy()
+    w2, v2 = q[:, 0], q[:, 1:]
+    qpos[sl, 3] = w1 * w2 - v2 @ v1
+    qpos[sl, 4:7] = w1 * v2 + w2[:, None] * v1 + np.cross(v1, v2)
+    qvel[sl, :3] = qvel[sl, :3] @ R3.T                                  # world linear velocity
+    sites[sl, :, :2] = (sites[sl, :, :2] - fx) @ R2.T + tx
+    meta = {}
+    for key, val in ref.meta.items():
+        if key.startswith("batch_tables_") and isinstance(val, dict):
+            tab = dict(val)
+            tab["R"] = val["R"].copy()
+            tab["R"][sl] = np.einsum("ij,tjk->tik", R3, val["R"][sl])
+            tab["yaw"] = val["yaw"].copy()
+            tab["yaw"][sl] = wrap_angle(val["yaw"][sl] + dyaw)
+            tab["com"] = val["com"].copy()
+            tab["com"][sl, :2] = (val["com"][sl, :2] - fx) @ R2.T + tx
+            tab["com_vel"] = val["com_vel"].copy()
+            tab["com_vel"][sl] = val["com_vel"][sl] @ R3.T
+            val = tab
+        meta[key] = val
+    return Reference(ref.fps, qpos, qvel, ref.ctrl, ref.ctrl_vel, sites, ref.penetration, ref.source, meta)
+
+
 class BatchEnv:
     """See the module docstring."""
 
@@ -301,6 +348,22 @@ class BatchEnv:
         m = np.maximum(m, float(self.config.velocity_targets))
         for k in (range(self.F) if fighter is None else [fighter]):
             self.vt_mask[self.fighter_of == k] = m
+
+    def place_on_body(self, slots) -> None:
+        """Re-place each slot's reference from its current step on under its simulated pelvis: the
+        reference pelvis's ground position and yaw there moved onto the body's (place_reference), as
+        a game places the next clip under its character. The env's reference becomes the placed copy."""
+        for b in np.atleast_1d(np.asarray(slots, dtype=np.int64)):
+            ref, tab = self.refs[b], self.tables[b]
+            if ref is None:
+                raise ValueError(f"place_on_body: slot {b} has no reference")
+            t = int(self.t[b])
+            k = int(self.fighter_of[b])
+            sim_yaw = float(yaws_of(self.R[b:b + 1], self.lateral[b])[0])
+            dyaw = float(wrap_angle(sim_yaw - float(tab["yaw"][t])))
+            placed = place_reference(ref, t, ref.qpos[t, :2], self.qpos[b, :2], dyaw)
+            self.refs[b] = placed
+            self.tables[b] = reference_tables(placed, self.layouts[k], self.scene, k)
 
     def set_torque_limits(self, limit: np.ndarray, fighter: int | None = None) -> None:
         for k in (range(self.F) if fighter is None else [fighter]):
@@ -624,6 +687,11 @@ class BatchEnv:
         r = (w.pose * np.exp(-2.0 * pose_err) + w.velocity * np.exp(-0.1 * vel_err) + w.end_effector
              * np.exp(-w.ee_scale * ee_err) + w.root * np.exp(-root_err)
              + w.com * np.exp(-w.com_scale * com_err))
+        if w.sites > 0.0:
+            sites = np.stack([self.refs[b].sites[int(self.t[b])] if self.refs[b] is not None else self.site_pos[b]
+                              for b in range(B)])
+            ds = self.site_pos[:, self.tracked] - sites[:, self.tracked]
+            r = r + w.sites * np.exp(-w.sites_scale * (ds * ds).sum(axis=2).mean(axis=1))
         if self.config.assist.active:
             r = r * np.exp(-w.assist_penalty * (self.assist_force_mg + self.assist_torque_mgm))
         return r

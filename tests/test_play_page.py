@@ -77,11 +77,19 @@ def test_the_page_loads_and_both_fighters_render(page, tmp_path):
 
     pg, srv, errors = page
     _wait(pg, "window.__play && window.__play.framesReceived > 15 && window.__play.rendered > 5")
-    _state(pg, "(window.__play.frozen = true)")        # hold the view still: the trunks stay where measured
-    time.sleep(0.3)
-    trunk = _state(pg, "window.__play.trunk")
-    shot = tmp_path / "play.png"
-    pg.screenshot(path=str(shot))
+    try:
+        for _ in range(20):                               # a hit's white flash hides a fighter's colour
+            _state(pg, "(window.__play.frozen = true)")    # hold the view still: the trunks stay where measured
+            time.sleep(0.3)
+            if not any(_state(pg, "window.__play.flashing")):
+                break
+            _state(pg, "(window.__play.frozen = false)")
+            time.sleep(0.2)
+        trunk = _state(pg, "window.__play.trunk")
+        shot = tmp_path / "play.png"
+        pg.screenshot(path=str(shot))
+    finally:
+        _state(pg, "(window.__play.frozen = false)")      # the other tests need a live view
     img = imread(str(shot))[..., :3]
     assert shot.stat().st_size > 20_000
     for who, (want, other) in enumerate(((0, 2), (2, 0))):   # A red, B blue

@@ -6,7 +6,7 @@ import * as THREE from '/vendor/three/three.module.js';
 const S = {
   hello: null, status: {}, frame: null, framesReceived: 0, rendered: 0, fps: 0,
   decisions: [], policies: [], errors: [], saved: null, bouts: null, replayEnd: null,
-  hud: {}, connected: false,
+  hud: {}, connected: false, flashing: [false, false],
 };
 window.__play = S;
 S.send = (type, fields) => send(type, fields);
@@ -344,6 +344,7 @@ function render(now) {
       for (let i = 0; i < P.length; i++) P[i] = prev[k][i] + (cur[k][i] - prev[k][i]) * a;
       fighters[k].update(P);
       fighters[k].flash(now);
+      S.flashing[k] = now < fighters[k].flashUntil;  // drawn white this frame (a hit's flash)
       if (k === 0) S.pa = [P[3 * pel], P[3 * pel + 2]];
       else S.pb = [P[3 * pel], P[3 * pel + 2]];
       drawn[k] = P;

@@ -185,8 +185,9 @@ class Rollouts:
         from tracker.track.evaluation import make_setup
         from tracker.track.pd import PDTracker, batched_model_options
         from tracker.track.walks import LibraryWalks
-        if cfg.placement not in ("world", "body"):
-            raise ValueError(f"placement must be 'world' or 'body', got {cfg.placement!r}")
+        from tracker.track.walk_protocol import PLACEMENTS
+        if cfg.placement not in PLACEMENTS:
+            raise ValueError(f"placement must be one of {PLACEMENTS}, got {cfg.placement!r}")
         self.cfg = cfg
         self.rng = np.random.default_rng(seed)
         self.src = LibraryWalks(library)

@@ -648,11 +648,16 @@ class BatchEnv:
         out[self.unstable] = FALL_UNSTABLE
         return out
 
-    def mpjpe(self) -> np.ndarray:
-        """(B,) mean distance (m) of the tracked joint sites to the reference's at the current step."""
+    def site_offsets(self) -> np.ndarray:
+        """(B, tracked sites, 3) world offsets (m) of the tracked joint sites from the reference's at
+        the current step (zero for a slot not started yet)."""
         sites = np.stack([self.refs[b].sites[int(self.t[b])] if self.refs[b] is not None else self.site_pos[b]
                           for b in range(self.B)])
-        diff = self.site_pos[:, self.tracked] - sites[:, self.tracked]
+        return self.site_pos[:, self.tracked] - sites[:, self.tracked]
+
+    def mpjpe(self) -> np.ndarray:
+        """(B,) mean distance (m) of the tracked joint sites to the reference's at the current step."""
+        diff = self.site_offsets()
         return np.sqrt((diff * diff).sum(axis=2)).mean(axis=1)
 
     def joint_coordinates(self) -> np.ndarray:
@@ -688,9 +693,7 @@ class BatchEnv:
              * np.exp(-w.ee_scale * ee_err) + w.root * np.exp(-root_err)
              + w.com * np.exp(-w.com_scale * com_err))
         if w.sites > 0.0:
-            sites = np.stack([self.refs[b].sites[int(self.t[b])] if self.refs[b] is not None else self.site_pos[b]
-                              for b in range(B)])
-            ds = self.site_pos[:, self.tracked] - sites[:, self.tracked]
+            ds = self.site_offsets()
             r = r + w.sites * np.exp(-w.sites_scale * (ds * ds).sum(axis=2).mean(axis=1))
         if self.config.assist.active:
             r = r * np.exp(-w.assist_penalty * (self.assist_force_mg + self.assist_torque_mgm))

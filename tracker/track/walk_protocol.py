@@ -68,6 +68,11 @@ def rerooted_site_errors(env: BatchEnv, b: int, anchor: tuple[np.ndarray, float,
     R = np.array([[c, -s], [s, c]])
     sites = ref.sites[t, env.tracked].copy()
     sites[:, :2] = (sites[:, :2] - ref_xy) @ R.T + sim_xy
+    return site_distances(env, b, sites)
+
+
+def site_distances(env: BatchEnv, b: int, sites: np.ndarray) -> np.ndarray:
+    """(tracked sites,) distances (m) of slot b's tracked joints to ``sites`` (tracked sites, 3)."""
     d = env.site_pos[b, env.tracked] - sites
     return np.sqrt((d * d).sum(axis=1))
 
@@ -138,9 +143,8 @@ def run_walks(setup, controller, walks: list[list[int]], config: BatchConfig = B
         live = info["live"]
         for b in np.nonzero(live)[0]:
             a = acc[b]
-            if placement == "body":
-                d = env.site_pos[b, env.tracked] - drawn[b].sites[int(env.t[b]), env.tracked]
-                a["err"].append(float(np.sqrt((d * d).sum(axis=1)).mean()))
+            if placement == "body":         # the global error is against the walk as drawn
+                a["err"].append(float(site_distances(env, b, drawn[b].sites[int(env.t[b]), env.tracked]).mean()))
             else:
                 a["err"].append(float(info["mpjpe_m"][b]))
             if a["anchor"] is not None:
